@@ -1,0 +1,324 @@
+"""Gmsh triangulation of a :class:`fdem.geometry.Model` conforming to its DFN, and mesh quality.
+
+The geometry module has already clipped the joints, merged their overlaps and split them at
+every crossing, so the model reaches Gmsh as a planar straight-line graph: boundary pieces form
+each body's curve loop, joint pieces are embedded curves sharing points at the junctions. No
+boolean operations are needed, which keeps meshing fast and deterministic.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import Model, Polygon
+from .mesh import JOINT_GROUP_PREFIX, Mesh
+from .topology import check_triangles
+
+BOUNDARY_GROUPS = ("bottom", "right", "left", "surface")
+
+ALGORITHMS = {"meshadapt": 1, "delaunay": 5, "frontal-delaunay": 6}
+
+
+def _unique_points(points: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merge points closer than ``tol``; returns (unique points, index of each input point)."""
+    tree = cKDTree(points)
+    rep = np.arange(len(points))
+    for i, j in sorted(tree.query_pairs(tol)):
+        ri, rj = rep[i], rep[j]
+        while rep[ri] != ri:
+            ri = rep[ri]
+        while rep[rj] != rj:
+            rj = rep[rj]
+        if ri != rj:
+            rep[max(ri, rj)] = min(ri, rj)
+    for i in range(len(rep)):
+        r = i
+        while rep[r] != r:
+            r = rep[r]
+        rep[i] = r
+    roots, index = np.unique(rep, return_inverse=True)
+    return points[roots], index
+
+
+def _boundary_pieces(body: Polygon, extra_points: np.ndarray, tol: float) -> np.ndarray:
+    """The body's boundary, counter-clockwise, split at every ``extra_points`` lying on it."""
+    pieces = []
+    for a, b in body.edges:
+        d = b - a
+        L2 = float(d @ d)
+        if len(extra_points):
+            s = (extra_points - a) @ d / L2
+            closest = a + s[:, None] * d
+            on = (np.linalg.norm(extra_points - closest, axis=1) <= tol) & (s > 0) & (s < 1)
+            ts = np.unique(np.r_[0.0, s[on], 1.0])
+        else:
+            ts = np.array([0.0, 1.0])
+        for t0, t1 in zip(ts[:-1], ts[1:]):
+            if (t1 - t0) * math.sqrt(L2) > tol:
+                pieces.append([a + t0 * d, a + t1 * d])
+    return np.array(pieces)
+
+
+def _classify_boundary(pieces: np.ndarray, bounds, tol: float) -> list[str]:
+    """Name each boundary piece ``bottom``, ``left``, ``right`` (on the model's extreme lines) or ``surface``."""
+    x0, y0, x1, y1 = bounds
+    names = []
+    for (ax, ay), (bx, by) in pieces:
+        if abs(ay - y0) <= tol and abs(by - y0) <= tol:
+            names.append("bottom")
+        elif abs(ax - x0) <= tol and abs(bx - x0) <= tol:
+            names.append("left")
+        elif abs(ax - x1) <= tol and abs(bx - x1) <= tol:
+            names.append("right")
+        else:
+            names.append("surface")
+    return names
+
+
+def mesh_model(model: Model, size: float, refine_near_joints: float | None = None,
+               refine_distance: float | None = None, algorithm: str = "frontal-delaunay",
+               min_angle_warning: float = 10.0, verbose: bool = False) -> Mesh:
+    """Triangulate ``model`` with Gmsh at target element ``size`` [m], conforming to every joint.
+
+    Parameters
+    ----------
+    size : target edge length [m].
+    refine_near_joints : optional factor < 1: element size on the joints is ``factor * size``,
+        growing back to ``size`` over ``refine_distance`` (default ``5 * size``).
+    algorithm : ``"frontal-delaunay"`` (best quality), ``"delaunay"`` (fastest) or ``"meshadapt"``.
+    min_angle_warning : warn (with count and worst angle) when triangles are sharper than this [deg].
+
+    Physical groups: curves ``bottom``, ``left``, ``right``, ``surface`` and ``joint_set_<j>``;
+    each body's triangles carry its index in ``Mesh.triangle_body``. Same input, same mesh.
+    """
+    if not (np.isfinite(size) and size > 0):
+        raise ValueError(f"mesh size must be positive, got {size}")
+    if refine_near_joints is not None and not (0 < refine_near_joints <= 1):
+        raise ValueError(f"refine_near_joints must be in (0, 1], got {refine_near_joints}")
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"unknown meshing algorithm {algorithm!r}; choose from {sorted(ALGORITHMS)}")
+    if size > 0.5 * model.size:
+        raise ValueError(f"mesh size {size} m is larger than half the model size {model.size:.3g} m")
+    dfn = model.dfn()
+    tol = max(model.tolerance * 1e3, 1e-12)  # vertex-merging tolerance: 1e-6 of the model size
+
+    import gmsh
+
+    own_session = not gmsh.isInitialized()
+    if own_session:
+        gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 1 if verbose else 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.clear()
+        gmsh.model.add("fdem")
+        geo = gmsh.model.geo
+        group_curves: dict[str, list[int]] = {}
+        surfaces = []
+        joint_curve_all = []
+        for b, body in enumerate(model.bodies):
+            mine = dfn.body == b
+            segs, sets = dfn.segments[mine], dfn.set_id[mine]
+            ends = segs.reshape(-1, 2)
+            boundary = _boundary_pieces(body, ends, tol)
+            pts, index = _unique_points(np.vstack([boundary.reshape(-1, 2), ends]), tol)
+            point_tags = [geo.addPoint(px, py, 0.0, size) for px, py in pts]
+            nb = len(boundary)
+            b_idx = index[: 2 * nb].reshape(-1, 2)
+            j_idx = index[2 * nb:].reshape(-1, 2)
+            loop = [geo.addLine(point_tags[i], point_tags[j]) for i, j in b_idx]
+            for tag, name in zip(loop, _classify_boundary(boundary, model.bounds, tol)):
+                group_curves.setdefault(name, []).append(tag)
+            surf = geo.addPlaneSurface([geo.addCurveLoop(loop)])
+            surfaces.append(surf)
+            joint_curves = []
+            for (i, j), s in zip(j_idx, sets):
+                if i == j:
+                    continue
+                tag = geo.addLine(point_tags[i], point_tags[j])
+                joint_curves.append(tag)
+                group_curves.setdefault(f"{JOINT_GROUP_PREFIX}{s}", []).append(tag)
+            joint_curve_all += joint_curves
+            geo.synchronize()
+            if joint_curves:
+                gmsh.model.mesh.embed(1, joint_curves, 2, surf)
+        geo.synchronize()
+        for name in sorted(group_curves, key=_group_order):
+            gmsh.model.addPhysicalGroup(1, group_curves[name], name=name)
+        for b, surf in enumerate(surfaces):
+            gmsh.model.addPhysicalGroup(2, [surf], tag=1000 + b, name=f"body_{b}")
+
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0 if refine_near_joints else 1)
+        if refine_near_joints is not None and joint_curve_all:
+            fd = gmsh.model.mesh.field.add("Distance")
+            gmsh.model.mesh.field.setNumbers(fd, "CurvesList", joint_curve_all)
+            gmsh.model.mesh.field.setNumber(fd, "Sampling", 20)
+            ft = gmsh.model.mesh.field.add("Threshold")
+            gmsh.model.mesh.field.setNumber(ft, "InField", fd)
+            gmsh.model.mesh.field.setNumber(ft, "SizeMin", refine_near_joints * size)
+            gmsh.model.mesh.field.setNumber(ft, "SizeMax", size)
+            gmsh.model.mesh.field.setNumber(ft, "DistMin", 0.0)
+            gmsh.model.mesh.field.setNumber(ft, "DistMax", refine_distance or 5 * size)
+            gmsh.model.mesh.field.setAsBackgroundMesh(ft)
+            gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+        gmsh.option.setNumber("Mesh.Algorithm", ALGORITHMS[algorithm])
+        gmsh.option.setNumber("Mesh.RandomSeed", 1)
+        gmsh.model.mesh.generate(2)
+        mesh = _extract_mesh(gmsh, surfaces)
+    finally:
+        if own_session:
+            gmsh.finalize()
+
+    check_triangles(mesh.points, mesh.triangles)
+    report = quality_report(mesh, worst=1)
+    if report.min_angle_deg < min_angle_warning:
+        warnings.warn(
+            f"{report.n_below_warning(min_angle_warning)} triangle(s) have an angle below "
+            f"{min_angle_warning:g} deg (worst {report.min_angle_deg:.2f} deg at "
+            f"{tuple(np.round(report.worst[0][2], 3))}), usually near sharp joint crossings", stacklevel=2)
+    return mesh
+
+
+def _group_order(name: str):
+    if name in BOUNDARY_GROUPS:
+        return (0, BOUNDARY_GROUPS.index(name))
+    return (1, int(name[len(JOINT_GROUP_PREFIX):]))
+
+
+def _extract_mesh(gmsh, surfaces) -> Mesh:
+    node_tags, coords, _ = gmsh.model.mesh.getNodes()
+    order = np.argsort(node_tags)
+    node_tags = np.asarray(node_tags)[order]
+    points = np.asarray(coords).reshape(-1, 3)[order, :2]
+
+    def ids(tags):
+        return np.searchsorted(node_tags, np.asarray(tags, dtype=np.uint64)).astype(np.int64)
+
+    tris, bodies = [], []
+    for b, surf in enumerate(surfaces):
+        types, _, enodes = gmsh.model.mesh.getElements(2, surf)
+        for etype, nodes in zip(types, enodes):
+            if etype != 2:
+                raise ValueError(f"unexpected element type {etype} in body {b}: only 3-node triangles are supported")
+            t = ids(nodes).reshape(-1, 3)
+            tris.append(t)
+            bodies.append(np.full(len(t), b, dtype=np.int32))
+    triangles = np.concatenate(tris)
+    # Gmsh orients triangles with the surface normal; make every one counter-clockwise in x-y.
+    p0, p1, p2 = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    cw = ((p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p1[:, 1] - p0[:, 1]) * (p2[:, 0] - p0[:, 0])) < 0
+    triangles[cw] = triangles[cw][:, [0, 2, 1]]
+
+    names, lines, groups = [], [], []
+    for dim, ptag in gmsh.model.getPhysicalGroups(1):
+        g = len(names)
+        names.append(gmsh.model.getPhysicalName(dim, ptag))
+        for curve in gmsh.model.getEntitiesForPhysicalGroup(dim, ptag):
+            _, _, enodes = gmsh.model.mesh.getElements(1, curve)
+            for nodes in enodes:
+                seg = ids(nodes).reshape(-1, 2)
+                lines.append(seg)
+                groups.append(np.full(len(seg), g, dtype=np.int32))
+    # Drop nodes no triangle uses (e.g. geometry points Gmsh kept unattached).
+    used = np.zeros(len(points), dtype=bool)
+    used[triangles.ravel()] = True
+    renum = np.cumsum(used) - 1
+    lines = np.concatenate(lines) if lines else np.zeros((0, 2), np.int64)
+    return Mesh(
+        points=np.ascontiguousarray(points[used]),
+        triangles=renum[triangles],
+        triangle_body=np.concatenate(bodies),
+        lines=renum[lines],
+        line_group=np.concatenate(groups) if groups else np.zeros(0, np.int32),
+        group_names=tuple(names),
+    )
+
+
+# ----------------------------------------------------------------------------- quality
+
+
+@dataclass(frozen=True)
+class QualityReport:
+    """Mesh quality figures.
+
+    ``min_angle_deg`` is the smallest interior angle of any triangle; ``edge_min`` and
+    ``edge_max`` bound the edge lengths [m]; ``worst`` lists ``(triangle, min angle [deg],
+    centroid)`` of the sharpest triangles.
+    """
+
+    n_triangles: int
+    n_nodes: int
+    area: float
+    min_angle_deg: float
+    mean_min_angle_deg: float
+    edge_min: float
+    edge_max: float
+    edge_mean: float
+    min_angles: np.ndarray
+    worst: list
+
+    def n_below_warning(self, angle: float) -> int:
+        return int(np.count_nonzero(self.min_angles < angle))
+
+    def as_dict(self) -> dict:
+        return {
+            "n_triangles": self.n_triangles,
+            "n_nodes": self.n_nodes,
+            "area_m2": self.area,
+            "min_angle_deg": self.min_angle_deg,
+            "mean_min_angle_deg": self.mean_min_angle_deg,
+            "fraction_min_angle_below_20deg": float(np.mean(self.min_angles < 20.0)),
+            "edge_min_m": self.edge_min,
+            "edge_max_m": self.edge_max,
+            "edge_mean_m": self.edge_mean,
+            "worst": [{"triangle": int(t), "min_angle_deg": float(a), "centroid": [float(c[0]), float(c[1])]}
+                      for t, a, c in self.worst],
+        }
+
+    def __str__(self) -> str:
+        lines = [
+            f"triangles {self.n_triangles}, nodes {self.n_nodes}, area {self.area:.6g} m^2",
+            f"min angle {self.min_angle_deg:.2f} deg (mean of per-triangle minima {self.mean_min_angle_deg:.2f} deg, "
+            f"{100 * np.mean(self.min_angles < 20):.2f} % below 20 deg)",
+            f"edge length {self.edge_min:.4g} .. {self.edge_max:.4g} m (mean {self.edge_mean:.4g} m)",
+            "worst: " + "; ".join(f"#{t} {a:.1f} deg at ({c[0]:.3f}, {c[1]:.3f})" for t, a, c in self.worst),
+        ]
+        return "\n".join(lines)
+
+
+def triangle_angles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(n_tri, 3) interior angles [deg] at each corner, from the law of cosines on edge vectors."""
+    p = points[triangles]
+    angles = np.empty(triangles.shape)
+    for k in range(3):
+        a = p[:, (k + 1) % 3] - p[:, k]
+        b = p[:, (k + 2) % 3] - p[:, k]
+        cross = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+        angles[:, k] = np.degrees(np.arctan2(cross, (a * b).sum(axis=1)))
+    return angles
+
+
+def quality_report(mesh: Mesh, worst: int = 5) -> QualityReport:
+    """Element count, minimum angle, edge-length range and the ``worst`` sharpest triangles."""
+    min_angles = triangle_angles(mesh.points, mesh.triangles).min(axis=1)
+    p = mesh.points[mesh.triangles]
+    edges = np.linalg.norm(p - np.roll(p, -1, axis=1), axis=2)
+    k = np.argsort(min_angles, kind="stable")[:worst]
+    centroids = p.mean(axis=1)
+    return QualityReport(
+        n_triangles=mesh.n_triangles,
+        n_nodes=len(mesh.points),
+        area=mesh.area(),
+        min_angle_deg=float(min_angles.min()),
+        mean_min_angle_deg=float(min_angles.mean()),
+        edge_min=float(edges.min()),
+        edge_max=float(edges.max()),
+        edge_mean=float(edges.mean()),
+        min_angles=min_angles,
+        worst=[(int(t), float(min_angles[t]), centroids[t]) for t in k],
+    )

@@ -1,0 +1,177 @@
+"""Slope profiles, joint sets and DFN processing (no meshing)."""
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from fdem.geometry import (BrickSet, IntermittentSet, Model, PersistentSet, Polygon, SegmentSet,
+                           StochasticSet, benched_slope, merge_collinear, rectangle, simple_slope,
+                           split_at_crossings)
+
+
+def test_simple_slope_shape_and_area():
+    H, alpha = 15.0, 45.0
+    s = simple_slope(H, alpha, crest_length=30, toe_length=45, base_depth=15)
+    x0, y0, x1, y1 = s.bounds
+    assert (x1 - x0, y1 - y0) == pytest.approx((45 + H / math.tan(math.radians(alpha)) + 30, 30))
+    # Rectangle minus the triangle above the face and the block above the toe floor.
+    expected = 90 * 30 - 45 * 15 - 0.5 * 15 * 15
+    assert s.area == pytest.approx(expected, rel=1e-14)
+
+
+def test_benched_slope_area():
+    s = benched_slope([(10, 90, 5), (10, 45, 0)], crest_length=10, toe_length=10, base_depth=5)
+    # Width 10 + 0 + 5 + 10 + 10 = 35; the profile is easy to integrate by pieces.
+    expected = 35 * 5 + 10 * (5 + 10 + 10) + 10 * 10 + 0.5 * 10 * 10
+    assert s.area == pytest.approx(expected, rel=1e-14)
+
+
+def test_polygon_is_made_counter_clockwise():
+    p = Polygon(np.array([[0, 0], [0, 1], [1, 1], [1, 0]]))
+    assert p.area == pytest.approx(1.0)
+
+
+def test_self_intersecting_profile_is_refused():
+    with pytest.raises(ValueError, match="self-intersecting"):
+        Polygon(np.array([[0, 0], [1, 1], [1, 0], [0, 1]]), name="bowtie")
+
+
+@pytest.mark.parametrize("dip", [-1.0, 180.0, 200.0])
+def test_dip_out_of_range(dip):
+    with pytest.raises(ValueError, match="dip must be in"):
+        PersistentSet(dip=dip, spacing=1.0)
+
+
+@pytest.mark.parametrize("spacing", [0.0, -1.0, float("nan")])
+def test_non_positive_spacing(spacing):
+    with pytest.raises(ValueError, match="spacing must be positive"):
+        PersistentSet(dip=10, spacing=spacing)
+    with pytest.raises(ValueError, match="spacing must be positive"):
+        BrickSet(dip=10, spacing=spacing)
+    with pytest.raises(ValueError, match="row_spacing must be positive"):
+        IntermittentSet(dip=10, trace_length=1, bridge_length=1, row_spacing=spacing)
+
+
+def test_joint_outside_domain_is_refused():
+    box = rectangle(0, 0, 10, 5)
+    js = SegmentSet([[1, 1, 4, 2], [20, 20, 25, 21]], name="mapped")
+    with pytest.raises(ValueError, match=r"segment 1 .* lies outside the domain"):
+        Model([box], [js]).dfn()
+
+
+def test_persistent_set_is_clipped_and_spaced():
+    box = rectangle(0, 0, 10, 10)
+    dfn = Model([box], [PersistentSet(dip=30, spacing=1.5, offset=0.2)]).dfn()
+    n = np.array([-math.sin(math.radians(30)), math.cos(math.radians(30))])
+    c = np.sort(dfn.segments[:, 0] @ n)
+    assert np.allclose(np.diff(c), 1.5, atol=1e-9)
+    assert np.allclose((c - 0.2) / 1.5, np.round((c - 0.2) / 1.5), atol=1e-9)
+    # Every segment runs wall to wall: both ends on the box boundary.
+    ends = dfn.segments.reshape(-1, 2)
+    on_edge = np.isclose(ends, 0, atol=1e-9) | np.isclose(ends, 10, atol=1e-9)
+    assert on_edge.any(axis=1).all()
+
+
+def test_brick_fabric_spacings_and_half_block_offset():
+    s, dip = 1.0, 15.0
+    box = rectangle(0, 0, 20, 12)
+    dfn = Model([box], [BrickSet(dip=dip, spacing=s)]).dfn()
+    t = np.array([math.cos(math.radians(dip)), math.sin(math.radians(dip))])
+    n = np.array([-t[1], t[0]])
+    seg = dfn.segments
+    d = seg[:, 1] - seg[:, 0]
+    along_persistent = np.abs(d @ n) < 1e-9 * np.linalg.norm(d, axis=1)
+    # Persistent joints: normal offsets are multiples of s.
+    c = np.unique(np.round(seg[along_persistent, 0] @ n, 9))
+    assert np.allclose(np.diff(c), s, atol=1e-9)
+    # Cross joints are perpendicular, span exactly one layer, and sit d = 2s apart along it.
+    cross = seg[~along_persistent]
+    interior = []
+    for a, b in cross:
+        lo, hi = sorted((a @ n, b @ n))
+        k = round(lo / s)
+        if abs(lo - k * s) < 1e-9 and abs(hi - (k + 1) * s) < 1e-9:  # whole cross joint, not clipped
+            interior.append((k, a @ t))
+            assert abs((b - a) @ t) < 1e-9
+    interior = np.array(interior)
+    assert len(interior) > 20
+    positions = {}
+    for k, x in interior:
+        positions.setdefault(int(k), []).append(x)
+    layer_phase = {}
+    for k, xs in positions.items():
+        xs = np.sort(xs)
+        if len(xs) > 1:
+            assert np.allclose(np.diff(xs), 2 * s, atol=1e-9)
+        layer_phase[k] = np.mod(xs[0], 2 * s)
+    ks = sorted(layer_phase)
+    for k0, k1 in zip(ks[:-1], ks[1:]):
+        if k1 == k0 + 1:
+            shift = np.mod(layer_phase[k1] - layer_phase[k0], 2 * s)
+            assert shift == pytest.approx(s, abs=1e-9)  # half a block d/2 = s
+
+
+def test_intermittent_set_traces_bridges_and_stagger():
+    box = rectangle(-50, -50, 100, 100)
+    js = IntermittentSet(dip=25, trace_length=3.0, bridge_length=3.0 / math.cos(math.radians(25)) - 3.0,
+                         row_spacing=2.14, stagger=0.7)
+    dfn = Model([box], [js]).dfn()
+    L = np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1)
+    whole = np.isclose(L, 3.0, atol=1e-9)
+    assert whole.mean() > 0.9
+    t = np.array([math.cos(math.radians(25)), math.sin(math.radians(25))])
+    n = np.array([-t[1], t[0]])
+    starts = dfn.segments[whole]
+    start_along = np.minimum(starts[:, 0] @ t, starts[:, 1] @ t)
+    rows = np.round(starts[:, 0] @ n / 2.14).astype(int)
+    period = js.trace_length + js.bridge_length
+    for r in np.unique(rows)[:5]:
+        x = np.sort(start_along[rows == r])
+        assert np.allclose(np.diff(x), period, atol=1e-9)
+        assert np.mod(x[0] - r * 0.7, period) == pytest.approx(0, abs=1e-9) or \
+            np.mod(x[0] - r * 0.7, period) == pytest.approx(period, abs=1e-9)
+
+
+def test_stochastic_set_same_seed_same_network():
+    box = rectangle(0, 0, 30, 20)
+    make = lambda seed: Model([box], [StochasticSet(count=40, length=("lognormal", 3, 1), dip=("normal", 60, 10),
+                                                    seed=seed)]).dfn().segments
+    a, b, c = make(7), make(7), make(8)
+    assert np.array_equal(a, b)
+    assert a.shape != c.shape or not np.allclose(a, c)
+
+
+def test_crossing_segments_are_split_and_collinear_overlaps_merged():
+    segs = np.array([[[0, 0], [4, 0]], [[2, 0], [6, 0]], [[3, -1], [3, 1]]], dtype=float)
+    merged, ids = merge_collinear(segs, np.array([2, 1, 1], np.int32), 1e-9)
+    assert len(merged) == 2
+    horizontal = merged[np.abs(merged[:, 1, 1] - merged[:, 0, 1]) < 1e-12][0]
+    assert sorted(horizontal[:, 0]) == pytest.approx([0, 6])
+    assert ids.min() == 1
+    pieces, src, angles = split_at_crossings(merged, 1e-9)
+    assert len(pieces) == 4
+    assert angles == pytest.approx([90.0])
+    assert np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum() == pytest.approx(8.0)
+
+
+def test_short_segments_dropped_with_count_and_sharp_crossings_warned():
+    box = rectangle(0, 0, 10, 10)
+    js = SegmentSet([[1, 1, 9, 1], [5, 1.02, 5, 0.5], [2, 0.8, 8, 1.3]])
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        dfn = Model([box], [js], min_joint_length=0.05).dfn()
+    messages = " ".join(str(x.message) for x in w)
+    assert "dropped 1 joint segment" in messages
+    assert "sharper than 15 deg" in messages and "worst 4.76 deg" in messages
+    assert dfn.n_dropped_short == 1
+
+
+def test_overlapping_bodies_are_refused():
+    with pytest.raises(ValueError, match="overlap"):
+        Model([rectangle(0, 0, 2, 2, "a"), rectangle(1, 1, 2, 2, "b")])
+
+
+def test_touching_bodies_are_allowed():
+    m = Model([rectangle(0, 0, 4, 1, "base"), rectangle(1, 1, 1, 1, "block")])
+    assert m.area == pytest.approx(5.0)
