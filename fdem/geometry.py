@@ -257,8 +257,10 @@ class PersistentSet:
 class IntermittentSet:
     """Rows of collinear joints of ``trace_length`` separated by rock bridges of ``bridge_length``.
 
-    Rows are ``row_spacing`` apart (normal distance); row ``k`` is shifted along its trace by
-    ``k * stagger`` [m]. ``offset`` shifts the rows normal to themselves, ``phase`` along them.
+    Rows are ``row_spacing`` apart (normal distance); row ``k`` lies on ``n . x = offset + k *
+    row_spacing`` and is shifted along its trace by ``k * stagger`` [m]; ``phase`` shifts every
+    row along its trace. ``rows = (k_first, k_last)`` keeps only those rows (inclusive); by
+    default the rows fill the domain.
     """
 
     dip: float
@@ -268,6 +270,7 @@ class IntermittentSet:
     stagger: float = 0.0
     offset: float = 0.0
     phase: float = 0.0
+    rows: tuple[int, int] | None = None
     name: str = "intermittent"
 
     def __post_init__(self):
@@ -285,7 +288,9 @@ class IntermittentSet:
         corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
         along = corners @ t
         out = []
-        for row, c in enumerate(np.round((offsets - self.offset) / self.row_spacing).astype(int)):
+        for c in np.round((offsets - self.offset) / self.row_spacing).astype(int):
+            if self.rows is not None and not (self.rows[0] <= c <= self.rows[1]):
+                continue
             shift = self.phase + c * self.stagger
             k0 = math.floor((along.min() - shift) / period) - 1
             k1 = math.ceil((along.max() - shift) / period) + 1
@@ -587,6 +592,29 @@ def split_at_crossings(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np
     return np.array(pieces).reshape(-1, 2, 2), np.array(source, dtype=np.int64), junction_angles
 
 
+def split_at_points(segments: np.ndarray, points: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Split segments wherever one of ``points`` (e.g. a corner of the body) lies on their interior.
+
+    Returns (pieces, index of source segment). Without this a joint passing exactly through a
+    boundary corner would leave that corner on a curve's interior and Gmsh a sliver there.
+    """
+    if len(segments) == 0 or len(points) == 0:
+        return segments, np.arange(len(segments))
+    a, d = segments[:, 0], segments[:, 1] - segments[:, 0]
+    L = np.linalg.norm(d, axis=1)
+    s = ((points[None, :, :] - a[:, None, :]) * d[:, None, :]).sum(-1) / (L * L)[:, None]
+    closest = a[:, None, :] + s[..., None] * d[:, None, :]
+    dist = np.linalg.norm(points[None] - closest, axis=-1)
+    inside = (dist <= tol) & (s * L[:, None] > tol) & ((1 - s) * L[:, None] > tol)
+    pieces, source = [], []
+    for i in range(len(segments)):
+        ts = np.r_[0.0, np.sort(s[i][inside[i]]), 1.0]
+        for t0, t1 in zip(ts[:-1], ts[1:]):
+            pieces.append([a[i] + t0 * d[i], a[i] + t1 * d[i]])
+            source.append(i)
+    return np.array(pieces), np.array(source, dtype=np.int64)
+
+
 def _candidate_pairs(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (i < j) of segments whose bounding boxes overlap, found through a uniform grid."""
     lo = segments.min(axis=1) - tol
@@ -737,6 +765,8 @@ class Model:
                 continue
             s, i = merge_collinear(segs[mine], ids[mine], tol)
             pieces, src, ang = split_at_crossings(s, tol)
+            pieces, src2 = split_at_points(pieces, self.bodies[b].vertices, tol)
+            src = src[src2]
             out_s.append(pieces)
             out_id.append(i[src])
             out_b.append(np.full(len(pieces), b, dtype=np.int32))

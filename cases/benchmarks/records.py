@@ -1,0 +1,47 @@
+"""Shared benchmark bookkeeping: every figure is a record naming what was measured, the mesh
+size, the thread count, the value, its unit and the machine, saved as JSON under docs/benchmarks/."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+from datetime import datetime, timezone
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "benchmarks"
+
+
+def machine() -> dict:
+    """What the figures were measured on."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "logical_cores": os.cpu_count(), "python": platform.python_version(),
+            "system": f"{platform.system()} {platform.release()}"}
+
+
+def record(what: str, value: float, unit: str, mesh_size: int | None = None, threads: int | None = None,
+           **extra) -> dict:
+    rec = {"what": what, "mesh_size": mesh_size, "threads": threads, "value": value, "unit": unit}
+    rec.update(extra)
+    return rec
+
+
+def save(name: str, records: list[dict], **meta) -> Path:
+    """Write ``docs/benchmarks/<name>.json`` and print each record."""
+    DOCS.mkdir(parents=True, exist_ok=True)
+    path = DOCS / f"{name}.json"
+    doc = {"benchmark": name, "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+           "machine": machine(), **meta, "records": records}
+    path.write_text(json.dumps(doc, indent=2))
+    for r in records:
+        size = f" mesh {r['mesh_size']}" if r.get("mesh_size") is not None else ""
+        thr = f" threads {r['threads']}" if r.get("threads") is not None else ""
+        print(f"{r['what']}:{size}{thr} -> {r['value']:.6g} {r['unit']}")
+    print(f"wrote {path}")
+    return path

@@ -1,0 +1,79 @@
+"""Geometries of the reference scenes of ``shared/cases.md``, as :class:`fdem.geometry.Model` objects.
+
+Where a paper is silent the choice is a keyword argument with the assumed default, named in
+the docstring, so a case script can expose it.
+"""
+from __future__ import annotations
+
+import math
+
+from .geometry import BrickSet, IntermittentSet, Model, rectangle, simple_slope
+
+FOUR_SLOPE_HEIGHT = 15.0
+FOUR_SLOPE_FACE_ANGLE = 45.0
+FOUR_SLOPE_JOINT_DIP = {"low": 15.0, "high": 115.0}
+FOUR_SLOPE_SPACING = {"fine": 1.0, "coarse": 5.0}
+
+
+def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_length: float | None = None,
+                     crest_length: float | None = None, base_depth: float | None = None,
+                     min_joint_length: float = 0.05) -> Model:
+    """The jointed slopes of cases.md A (seed 002): H = 15 m, face 45 deg, brick fabric.
+
+    ``angle`` is ``"low"`` (persistent joints at 15 deg, inclined) or ``"high"`` (115 deg,
+    anti-inclined). ``spacing`` is ``"fine"`` (s = 1 m, s:H = 1:15), ``"coarse"`` (s = 5 m, s:H
+    = 1:3 as in the paper's text; its figure caption says 1:5, pass ``3.0`` for that) or a
+    number [m]. Cross joints are perpendicular at d = 2 s, offset half a block between layers.
+
+    Assumed (the paper gives no extents): toe floor 3 H, crest plateau 2 H, base H below the toe.
+    """
+    if angle not in FOUR_SLOPE_JOINT_DIP:
+        raise ValueError(f"angle must be 'low' or 'high', got {angle!r}")
+    s = FOUR_SLOPE_SPACING[spacing] if isinstance(spacing, str) else float(spacing)
+    H = FOUR_SLOPE_HEIGHT
+    toe_length = 3 * H if toe_length is None else toe_length
+    base_depth = H if base_depth is None else base_depth
+    slope = simple_slope(H, FOUR_SLOPE_FACE_ANGLE, crest_length=2 * H if crest_length is None else crest_length,
+                         toe_length=toe_length, base_depth=base_depth, name="slope")
+    # Layers start at the toe, so a persistent joint daylights through the toe as in the paper.
+    toe = (toe_length, base_depth)
+    dip = FOUR_SLOPE_JOINT_DIP[angle]
+    n = (-math.sin(math.radians(dip)), math.cos(math.radians(dip)))
+    offset = toe[0] * n[0] + toe[1] * n[1]
+    fabric = BrickSet(dip=dip, spacing=s, offset=offset, name=f"{angle}-angle brick fabric")
+    return Model([slope], [fabric], min_joint_length=min_joint_length)
+
+
+def muliashi_model(min_joint_length: float = 0.05) -> Model:
+    """The Muliashi open-pit slope of cases.md B (seed 001): 30 m x 22.5 m, 15 m bench at 65 deg,
+    five layers of intermittent bedding joints (3 m long, dip 25 deg, 3 m apart along a layer,
+    2.14 m between layers) above the toe.
+
+    Assumed: the toe 7.5 m above the base; the lowest row one row spacing above the toe's bedding plane.
+    """
+    width, height, bench, face = 30.0, 22.5, 15.0, 65.0
+    crest = 7.5
+    run = bench / math.tan(math.radians(face))
+    toe_x = width - crest - run
+    slope = simple_slope(bench, face, crest_length=crest, toe_length=toe_x, base_depth=height - bench, name="slope")
+    dip = 25.0
+    t = (math.cos(math.radians(dip)), math.sin(math.radians(dip)))
+    n = (-t[1], t[0])
+    offset = toe_x * n[0] + (height - bench) * n[1]
+    # 3 m horizontal spacing between joint starts along a layer: the along-trace period is 3 / cos(dip).
+    period = 3.0 / t[0]
+    joints = IntermittentSet(dip=dip, trace_length=3.0, bridge_length=period - 3.0, row_spacing=2.14,
+                             stagger=0.0, offset=offset, rows=(1, 5), name="bedding")
+    return Model([slope], [joints], min_joint_length=min_joint_length)
+
+
+def block_on_incline_model(block_width: float = 1.0, block_height: float = 1.0, base_length: float = 10.0,
+                           base_thickness: float = 1.0) -> Model:
+    """A block resting on a plane, built horizontal (tilt gravity to incline it).
+
+    Two bodies, ``incline`` (0) and ``block`` (1), meshed separately so they interact by contact.
+    """
+    base = rectangle(0.0, 0.0, base_length, base_thickness, name="incline")
+    x0 = 0.5 * (base_length - block_width)
+    block = rectangle(x0, base_thickness, block_width, block_height, name="block")
+    return Model([base, block])
