@@ -759,6 +759,7 @@ class Model:
         segs, ids, bodies = np.concatenate(segs), np.concatenate(ids), np.concatenate(bodies)
 
         out_s, out_id, out_b, angles = [], [], [], []
+        n_short, shortest = 0, np.inf
         for b in range(len(self.bodies)):
             mine = bodies == b
             if not mine.any():
@@ -766,27 +767,90 @@ class Model:
             s, i = merge_collinear(segs[mine], ids[mine], tol)
             pieces, src, ang = split_at_crossings(s, tol)
             pieces, src2 = split_at_points(pieces, self.bodies[b].vertices, tol)
-            src = src[src2]
+            sid = i[src[src2]]
+            lengths = np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1)
+            short = lengths < max(self.min_joint_length, 10 * tol)
+            n_short += int(short.sum())
+            if short.any():
+                shortest = min(shortest, float(lengths[short].min()))
+            pieces, sid = pieces[~short], sid[~short]
+            if self.min_joint_length > 0:
+                pieces, sid = snap_vertices(pieces, sid, self.bodies[b], self.min_joint_length, tol)
             out_s.append(pieces)
-            out_id.append(i[src])
+            out_id.append(sid)
             out_b.append(np.full(len(pieces), b, dtype=np.int32))
             angles.append(ang)
         segs, ids, bodies = np.concatenate(out_s), np.concatenate(out_id), np.concatenate(out_b)
         angles = np.concatenate(angles)
-
-        lengths = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
-        short = lengths < max(self.min_joint_length, 10 * tol)
-        n_short = int(short.sum())
         if n_short:
             warnings.warn(
                 f"dropped {n_short} joint segment(s) shorter than {self.min_joint_length:.3g} m "
-                f"(shortest {lengths[short].min():.3g} m)", stacklevel=3)
+                f"(shortest {shortest:.3g} m)", stacklevel=3)
         if angles.size and angles.min() < self.small_angle_warning:
             sharp = angles < self.small_angle_warning
             warnings.warn(
                 f"{int(sharp.sum())} joint crossing(s) sharper than {self.small_angle_warning:g} deg "
                 f"(worst {angles.min():.2f} deg): expect small mesh angles there", stacklevel=3)
-        return DFN(segs[~short], ids[~short].astype(np.int32), bodies[~short], angles, n_short)
+        return DFN(segs, ids.astype(np.int32), bodies, angles, n_short)
+
+
+def cluster_points(points: np.ndarray, radius: float, prefer: np.ndarray | None = None) -> np.ndarray:
+    """Index of the representative of each point after merging points closer than ``radius``.
+
+    Clusters are the connected components of the "closer than radius" graph; the representative
+    is the first ``prefer``-red member (e.g. a point on the boundary), else the lowest index.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    rank = np.arange(n) - (n * prefer.astype(np.int64) if prefer is not None else 0)
+    best = np.full(label.max() + 1, np.iinfo(np.int64).max)
+    np.minimum.at(best, label, rank)
+    rep_rank = best[label]
+    return np.where(rep_rank < 0, rep_rank + n, rep_rank)
+
+
+def snap_vertices(segments: np.ndarray, set_id: np.ndarray, body: Polygon, radius: float,
+                  tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Move joint vertices closer than ``radius`` to the body's boundary onto it, and merge vertices
+    closer than ``radius`` to each other, so no mesh feature is smaller than ``radius``.
+
+    A joint bends by at most ``radius`` where this happens. Segments that collapse to a point or
+    duplicate another are removed. Without it a junction 2 mm from the floor leaves a sliver
+    whose altitude, not the element size, would set the explicit time step.
+    """
+    ends = segments.reshape(-1, 2).copy()
+    corners = body.vertices
+    d_corner = np.linalg.norm(ends[:, None, :] - corners[None], axis=2)
+    k = np.argmin(d_corner, axis=1)
+    to_corner = d_corner[np.arange(len(ends)), k] <= radius
+    ends[to_corner] = corners[k[to_corner]]
+    edges = body.edges
+    a, ab = edges[:, 0], edges[:, 1] - edges[:, 0]
+    t = np.clip(((ends[:, None] - a[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1)[None], 0, 1)
+    closest = a[None] + t[..., None] * ab[None]
+    dist = np.linalg.norm(ends[:, None] - closest, axis=2)
+    e = np.argmin(dist, axis=1)
+    dmin = dist[np.arange(len(ends)), e]
+    to_edge = ~to_corner & (dmin <= radius)
+    ends[to_edge] = closest[to_edge, e[to_edge]]
+    on_boundary = to_corner | (dmin <= tol) | to_edge
+    ends = ends[cluster_points(ends, radius, prefer=on_boundary)]
+    segs = ends.reshape(-1, 2, 2)
+    keep = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) > tol
+    # A segment lying along the boundary after snapping is the boundary itself.
+    mid = 0.5 * (segs[:, 0] + segs[:, 1])
+    keep &= _point_segment_distance(mid, edges).min(axis=1) > tol
+    segs, set_id = segs[keep], set_id[keep]
+    key = np.sort(np.round(segs.reshape(-1, 4) / max(tol, 1e-300)).astype(np.int64).reshape(-1, 2, 2), axis=1)
+    _, first = np.unique(key.reshape(-1, 4), axis=0, return_index=True)
+    first = np.sort(first)
+    return segs[first], set_id[first]
 
 
 def _check_no_overlap(a: Polygon, b: Polygon, tol: float) -> None:
