@@ -49,7 +49,8 @@ def muliashi_model(min_joint_length: float = 0.05) -> Model:
     five layers of intermittent bedding joints (3 m long, dip 25 deg, 3 m apart along a layer,
     2.14 m between layers) above the toe.
 
-    Assumed: the toe 7.5 m above the base; the lowest row one row spacing above the toe's bedding plane.
+    Assumed: the toe 7.5 m above the base; the lowest row half a row spacing above the bedding
+    plane through the toe, so all five rows cut the face below the crest.
     """
     width, height, bench, face = 30.0, 22.5, 15.0, 65.0
     crest = 7.5
@@ -63,7 +64,7 @@ def muliashi_model(min_joint_length: float = 0.05) -> Model:
     # 3 m horizontal spacing between joint starts along a layer: the along-trace period is 3 / cos(dip).
     period = 3.0 / t[0]
     joints = IntermittentSet(dip=dip, trace_length=3.0, bridge_length=period - 3.0, row_spacing=2.14,
-                             stagger=0.0, offset=offset, rows=(1, 5), name="bedding")
+                             stagger=0.0, offset=offset + 0.5 * 2.14, rows=(0, 4), name="bedding")
     return Model([slope], [joints], min_joint_length=min_joint_length)
 
 

@@ -175,3 +175,42 @@ def test_overlapping_bodies_are_refused():
 def test_touching_bodies_are_allowed():
     m = Model([rectangle(0, 0, 4, 1, "base"), rectangle(1, 1, 1, 1, "block")])
     assert m.area == pytest.approx(5.0)
+
+
+def test_vertices_near_the_boundary_are_snapped_onto_it():
+    box = rectangle(0, 0, 10, 10)
+    # A junction 4 mm above the floor: the 4 mm stub is dropped and the junction moves to the floor.
+    js = SegmentSet([[1, 0.004, 9, 0.004 + 8 * math.tan(math.radians(20))], [1.0, 0.0, 1.0, 3.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dfn = Model([box], [js], min_joint_length=0.05).dfn()
+    ends = dfn.segments.reshape(-1, 2)
+    off_boundary = (ends[:, 1] > 0) & (ends[:, 1] < 10) & (ends[:, 0] > 0) & (ends[:, 0] < 10)
+    # Every vertex is either on the boundary or at least min_joint_length away from it.
+    gap = np.minimum.reduce([ends[:, 0], ends[:, 1], 10 - ends[:, 0], 10 - ends[:, 1]])
+    assert np.all(gap[off_boundary] >= 0.05)
+    assert np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1).min() >= 0.05
+
+
+def test_four_slope_scene_has_a_persistent_joint_through_the_toe():
+    from fdem.scenes import four_slope_model
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = four_slope_model("low", "coarse")
+        dfn = model.dfn()
+    toe = np.array([45.0, 15.0])
+    ends = dfn.segments.reshape(-1, 2)
+    assert np.min(np.linalg.norm(ends - toe, axis=1)) < 1e-9
+
+
+def test_muliashi_scene_has_five_rows_of_three_metre_joints():
+    from fdem.scenes import muliashi_model
+
+    dfn = muliashi_model().dfn()
+    t = np.array([math.cos(math.radians(25)), math.sin(math.radians(25))])
+    n = np.array([-t[1], t[0]])
+    rows = np.unique(np.round(dfn.segments[:, 0] @ n, 6))
+    assert len(rows) == 5 and np.allclose(np.diff(rows), 2.14)
+    L = np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1)
+    assert np.isclose(L, 3.0).sum() >= 10
