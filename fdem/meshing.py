@@ -12,9 +12,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from .geometry import Model, Polygon
+from .geometry import Model, Polygon, cluster_points
 from .mesh import JOINT_GROUP_PREFIX, Mesh
 from .topology import check_triangles
 
@@ -25,22 +24,7 @@ ALGORITHMS = {"meshadapt": 1, "delaunay": 5, "frontal-delaunay": 6}
 
 def _unique_points(points: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """Merge points closer than ``tol``; returns (unique points, index of each input point)."""
-    tree = cKDTree(points)
-    rep = np.arange(len(points))
-    for i, j in sorted(tree.query_pairs(tol)):
-        ri, rj = rep[i], rep[j]
-        while rep[ri] != ri:
-            ri = rep[ri]
-        while rep[rj] != rj:
-            rj = rep[rj]
-        if ri != rj:
-            rep[max(ri, rj)] = min(ri, rj)
-    for i in range(len(rep)):
-        r = i
-        while rep[r] != r:
-            r = rep[r]
-        rep[i] = r
-    roots, index = np.unique(rep, return_inverse=True)
+    roots, index = np.unique(cluster_points(points, tol), return_inverse=True)
     return points[roots], index
 
 
