@@ -214,3 +214,12 @@ def test_muliashi_scene_has_five_rows_of_three_metre_joints():
     assert len(rows) == 5 and np.allclose(np.diff(rows), 2.14)
     L = np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1)
     assert np.isclose(L, 3.0).sum() >= 10
+
+
+def test_disc_area():
+    from fdem.geometry import disc
+
+    d = disc((0, 0), 0.5, n_sides=64)
+    assert d.area == pytest.approx(32 * 0.25 * math.sin(2 * math.pi / 64), rel=1e-14)
+    with pytest.raises(ValueError, match="radius must be positive"):
+        disc((0, 0), 0.0)
