@@ -1,0 +1,582 @@
+"""Cohesive crack elements: property sets, validation, heterogeneity and the force provider.
+
+The law (per integration point; Munjiza 2004 ch. 7; Munjiza, Andrews & White 1999; Lisjak et
+al. 2014) lives in :func:`fdem.kernels.cracks.point_law` and is derived in ``docs/cohesive.md``:
+
+* penalty (elastic) rise ``sigma = k_n o`` to the tensile strength ``f_t`` and
+  ``tau = k_t s`` to the Mohr-Coulomb strength ``f_s = c + sigma_n tan(phi)``
+  (``sigma_n`` compressive, tension cut-off: in tension ``f_s = c``);
+* softening with the Munjiza (Evans-Marathe) shape ``z(D)`` (default) or linear, with areas
+  ``G_I`` (total work to open a unit area at zero shear) and ``G_II`` (work of the cohesive
+  part of the shear strength; the frictional part ``sigma_n tan(phi)`` is friction);
+* elliptical mixed-mode damage ``D = sqrt(xi_I^2 + xi_II^2)``, never healing; full normal
+  penalty in compression; the element breaks when ``D >= 1`` at both integration points.
+
+Integration points: the two end points (node pairs 0-3 and 1-2). Nodal (Lobatto)
+quadrature of an interface element decouples the ends, so each node pair has its own traction
+and damage, avoids the traction oscillations that Gauss quadrature causes in stiff penalty
+interfaces (Schellekens & de Borst 1993), integrates a uniform separation exactly and maps
+tractions to nodal forces without an interpolation matrix (``f = w T``, ``w = L0/2``).
+
+Units: SI, plane strain per metre of thickness (forces in N/m, energies in J/m).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .kernels import cracks as K
+from .topology import INTACT, Topology
+
+__all__ = [
+    "CrackProperties", "Heterogeneity", "CrackSet", "four_slope_property_sets",
+    "softening_integral", "softening_max_slope", "EVENT_DTYPE", "MODE_NAMES",
+]
+
+SOFTENING_KINDS = {"munjiza": K.MUNJIZA, "linear": K.LINEAR}
+
+
+def _softening_constants(kind: int) -> tuple[float, float]:
+    """``(Zbar, max|z'|)`` of a softening shape: area ``int_0^1 z dD`` and steepest slope."""
+    if kind == K.LINEAR:
+        return 0.5, 1.0
+    xg, wg = np.polynomial.legendre.leggauss(80)
+    d = 0.5 * (xg + 1.0)
+    zbar = 0.5 * float(sum(wi * K.softening(di, kind) for di, wi in zip(d, wg)))
+    grid = np.linspace(0.0, 1.0, 100001)
+    zz = np.array([K.softening(g, kind) for g in grid])
+    slope = float(np.max(-np.diff(zz)) / (grid[1] - grid[0]))
+    return zbar, slope
+
+
+_ZCONST: dict[int, tuple[float, float]] = {}
+
+
+def softening_integral(kind: str = "munjiza") -> float:
+    """Area under the normalised softening curve, ``int_0^1 z(D) dD`` (0.38631 Munjiza, 0.5 linear)."""
+    k = SOFTENING_KINDS[kind]
+    if k not in _ZCONST:
+        _ZCONST[k] = _softening_constants(k)
+    return _ZCONST[k][0]
+
+
+def softening_max_slope(kind: str = "munjiza") -> float:
+    """Steepest descent ``max |dz/dD|`` of the softening curve (2.0402 Munjiza, 1 linear)."""
+    k = SOFTENING_KINDS[kind]
+    if k not in _ZCONST:
+        _ZCONST[k] = _softening_constants(k)
+    return _ZCONST[k][1]
+
+
+@dataclass(frozen=True)
+class CrackProperties:
+    """Parameters of one crack-element property set (intact rock bridges, or one DFN joint set).
+
+    Attributes
+    ----------
+    f_t : tensile strength [Pa], > 0
+    c : cohesion [Pa], >= 0
+    phi : friction angle [deg], in [0, 90)
+    G_I : mode-I fracture energy [J/m^2]: total work to separate a unit area in pure opening
+    G_II : mode-II fracture energy [J/m^2]: work of the cohesive part ``c`` of the shear
+        strength in pure sliding; the frictional part ``sigma_n tan(phi)`` is dissipated as
+        friction (reported separately) and is not part of ``G_II``
+    p_n, p_t : normal / tangential penalty in Munjiza's convention [Pa]: the stiffness per unit
+        area of an element of reference length ``L0`` is ``k = p / L0`` [Pa/m]
+    k_n, k_t : alternatively the stiffness per unit area directly [Pa/m]; give exactly one of
+        ``p_n``/``k_n`` and at most one of ``p_t``/``k_t`` (default ``p_t = p_n`` or ``k_t = k_n``)
+    phi_res : residual friction angle of the broken faces handed to contact [deg]
+        (default ``phi``)
+    softening : ``"munjiza"`` (Evans-Marathe shape, default) or ``"linear"``
+    name : label used in error messages
+    """
+
+    f_t: float
+    c: float
+    phi: float
+    G_I: float
+    G_II: float
+    p_n: float | None = None
+    p_t: float | None = None
+    k_n: float | None = None
+    k_t: float | None = None
+    phi_res: float | None = None
+    softening: str = "munjiza"
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        who = f"crack property set {self.name!r}" if self.name else "crack property set"
+        for attr in ("f_t", "c", "phi", "G_I", "G_II"):
+            v = getattr(self, attr)
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+                raise ValueError(f"{who}: {attr} must be a finite number, got {v!r}")
+            if v < 0:
+                raise ValueError(f"{who}: {attr} must not be negative, got {v}")
+        if self.f_t <= 0:
+            raise ValueError(f"{who}: tensile strength f_t must be positive, got {self.f_t} Pa")
+        if self.G_I <= 0:
+            raise ValueError(f"{who}: mode-I fracture energy G_I must be positive, got {self.G_I} J/m^2")
+        if self.c > 0 and self.G_II <= 0:
+            raise ValueError(f"{who}: mode-II fracture energy G_II must be positive when c > 0, got {self.G_II} J/m^2")
+        if not 0.0 <= self.phi < 90.0:
+            raise ValueError(f"{who}: friction angle phi must be in [0, 90) deg, got {self.phi}")
+        if self.phi_res is not None and not 0.0 <= self.phi_res < 90.0:
+            raise ValueError(f"{who}: residual friction angle phi_res must be in [0, 90) deg, got {self.phi_res}")
+        if (self.p_n is None) == (self.k_n is None):
+            raise ValueError(f"{who}: give exactly one of p_n [Pa] or k_n [Pa/m] for the normal penalty")
+        if self.p_t is not None and self.k_t is not None:
+            raise ValueError(f"{who}: give at most one of p_t [Pa] or k_t [Pa/m] for the tangential penalty")
+        for attr in ("p_n", "p_t", "k_n", "k_t"):
+            v = getattr(self, attr)
+            if v is not None and (not math.isfinite(v) or v <= 0):
+                raise ValueError(f"{who}: penalty {attr} must be positive and finite, got {v}")
+        if self.softening not in SOFTENING_KINDS:
+            raise ValueError(f"{who}: softening must be one of {sorted(SOFTENING_KINDS)}, got {self.softening!r}")
+
+    def stiffness(self, length0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normal and tangential stiffness per unit area ``(k_n, k_t)`` [Pa/m] of elements of
+        reference length ``length0`` [m]."""
+        L = np.asarray(length0, dtype=np.float64)
+        kn = np.full_like(L, self.k_n) if self.k_n is not None else self.p_n / L
+        if self.k_t is not None:
+            kt = np.full_like(L, self.k_t)
+        elif self.p_t is not None:
+            kt = self.p_t / L
+        elif self.k_n is not None:
+            kt = np.full_like(L, self.k_n)
+        else:
+            kt = self.p_n / L
+        return kn, kt
+
+    @property
+    def tan_phi(self) -> float:
+        return math.tan(math.radians(self.phi))
+
+    @property
+    def tan_phi_res(self) -> float:
+        return math.tan(math.radians(self.phi if self.phi_res is None else self.phi_res))
+
+
+def four_slope_property_sets() -> dict[int, CrackProperties]:
+    """The paper's crack-element table (seed 002, Table 1; ``/shared/cases.md`` section A).
+
+    Tag 0: intact rock bridges; tag 1: DFN fractures. The normal penalty "5.9 GPa.m" is read
+    as Munjiza's penalty ``p_n = 5.9 GPa`` (= 10 E; ``k_n = p_n / L0``); the tangential
+    "917 GPa/m" as a stiffness per unit area ``k_t = 917 GPa/m`` (see ``docs/cohesive.md``).
+    """
+    common = dict(p_n=5.9e9, k_t=917e9)
+    return {
+        INTACT: CrackProperties(f_t=50e3, c=100e3, phi=30.0, G_I=130.0, G_II=1300.0,
+                                name="intact rock bridges", **common),
+        1: CrackProperties(f_t=10e3, c=50e3, phi=11.0, G_I=13.0, G_II=130.0,
+                           name="DFN joints", **common),
+    }
+
+
+@dataclass(frozen=True)
+class Heterogeneity:
+    """Per-element strength multipliers (applied to ``f_t`` and ``c``), mean 1.
+
+    distribution : ``"none"``, ``"normal"`` (``1 + cov N(0,1)``) or ``"weibull"`` (shape
+        ``weibull_modulus``, scaled to mean 1)
+    cov : coefficient of variation of the normal distribution (e.g. 0.1 for the Muliashi bonds)
+    weibull_modulus : Weibull shape ``m`` (> 0)
+    seed : seed of ``numpy.random.default_rng``
+    tags : joint-set tags it applies to (``None``: all)
+    min_factor : draws below this multiplier are clipped to it (strength stays positive)
+    """
+
+    distribution: str = "none"
+    cov: float = 0.1
+    weibull_modulus: float = 10.0
+    seed: int | None = 0
+    tags: tuple[int, ...] | None = None
+    min_factor: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.distribution not in ("none", "normal", "weibull"):
+            raise ValueError(f"heterogeneity distribution must be 'none', 'normal' or 'weibull', got {self.distribution!r}")
+        if self.cov < 0 or not math.isfinite(self.cov):
+            raise ValueError(f"heterogeneity cov must be >= 0, got {self.cov}")
+        if self.weibull_modulus <= 0:
+            raise ValueError(f"Weibull modulus must be positive, got {self.weibull_modulus}")
+        if not 0 < self.min_factor <= 1:
+            raise ValueError(f"heterogeneity min_factor must be in (0, 1], got {self.min_factor}")
+
+    def draw(self, tag: np.ndarray) -> np.ndarray:
+        """(n,) multipliers for elements with joint-set tags ``tag``."""
+        n = tag.shape[0]
+        out = np.ones(n)
+        if self.distribution == "none":
+            return out
+        rng = np.random.default_rng(self.seed)
+        if self.distribution == "normal":
+            draw = 1.0 + self.cov * rng.standard_normal(n)
+        else:
+            m = self.weibull_modulus
+            draw = rng.weibull(m, n) / math.gamma(1.0 + 1.0 / m)
+        sel = np.ones(n, bool) if self.tags is None else np.isin(tag, np.asarray(self.tags))
+        out[sel] = np.maximum(draw[sel], self.min_factor)
+        return out
+
+
+EVENT_DTYPE = np.dtype([
+    ("element", np.int64), ("step", np.int64), ("time", np.float64),
+    ("x", np.float64), ("y", np.float64), ("mode", "U5"), ("tag", np.int32),
+    ("length", np.float64), ("energy", np.float64),
+    ("energy_I", np.float64), ("energy_II", np.float64),
+])
+"""Fracture event: element id, step, time [s], midpoint [m], mode ("I", "II", "mixed"),
+joint-set tag, reference length [m], dissipated fracture energy [J/m] (total, mode-I part,
+mode-II part; friction excluded)."""
+
+MODE_NAMES = ("I", "II", "mixed")
+MODE_SHARE = 0.2
+"""Failure mode of an event from the elliptical damage at breakage: with
+``share = xi_II^2 / D^2`` (mean of the two ends), mode I when ``share < 0.2``, mode II when
+``share > 0.8``, mixed otherwise."""
+
+
+class CrackSet:
+    """All crack elements of a topology: the force provider the solver calls every step.
+
+    Parameters
+    ----------
+    topology : Topology
+    property_sets : mapping ``tag -> CrackProperties`` (or a sequence indexed by tag); tag 0
+        is intact rock, ``j >= 1`` DFN joint set ``j``. Every tag present in
+        ``topology.crack_tag`` needs a set.
+    heterogeneity : Heterogeneity or None
+    scheme : ``"colour"`` (elements coloured so each colour scatters race-free) or
+        ``"gather"`` (per-element forces stored, then gathered per node through a
+        node -> (crack, slot) map of at most 2 entries). Both give identical forces; colour is
+        the faster on this hardware (see ``docs/benchmarks/cracks.json``).
+    parallel_min : below this many live elements a serial loop runs instead (no threading
+        overhead on small problems).
+
+    State exposed for output (topology order): ``damage`` (n,) in [0, 1], ``damage_ip`` (n, 2),
+    ``broken`` (n,) bool, ``dissipated`` (n, 3), ``crack_fields()``, ``events`` (structured
+    array, :data:`EVENT_DTYPE`), ``newly_broken`` (ids broken by the last :meth:`add_forces`,
+    for contact to pick up their faces), ``residual_friction`` (n,) ``tan(phi_res)`` for contact,
+    ``active`` (ids of live elements).
+    """
+
+    def __init__(self, topology: Topology, property_sets: Mapping[int, CrackProperties] | Sequence[CrackProperties],
+                 heterogeneity: Heterogeneity | None = None, scheme: str = "colour",
+                 parallel_min: int = K.PARALLEL_MIN) -> None:
+        if scheme not in ("colour", "gather"):
+            raise ValueError(f"scheme must be 'colour' or 'gather', got {scheme!r}")
+        self.topology = topology
+        self.scheme = scheme
+        self.parallel_min = int(parallel_min)
+        if not isinstance(property_sets, Mapping):
+            property_sets = dict(enumerate(property_sets))
+        self.property_sets: dict[int, CrackProperties] = dict(property_sets)
+        for tag, p in self.property_sets.items():
+            if not isinstance(tag, (int, np.integer)) or tag < 0:
+                raise ValueError(f"property-set keys are joint-set tags (int >= 0), got {tag!r}")
+            if not isinstance(p, CrackProperties):
+                raise ValueError(f"property set for tag {tag} must be a CrackProperties, got {type(p).__name__}")
+        self.heterogeneity = heterogeneity or Heterogeneity()
+
+        tag = np.asarray(topology.crack_tag, dtype=np.int32)
+        self.tag = tag
+        n = tag.shape[0]
+        present = np.unique(tag)
+        missing = [int(t) for t in present if int(t) not in self.property_sets]
+        if missing:
+            t = missing[0]
+            c = int(np.flatnonzero(tag == t)[0])
+            mid = topology.x0[topology.crack_nodes[c, :2]].mean(axis=0)
+            what = "intact rock bridges" if t == INTACT else f"DFN joint set {t}"
+            raise ValueError(
+                f"crack elements with tag(s) {missing} have no property set (e.g. element {c} at "
+                f"({mid[0]:.6g}, {mid[1]:.6g}) on {what}); given sets: {sorted(self.property_sets)}")
+
+        self.length0 = np.asarray(topology.crack_length0, dtype=np.float64)
+        self.nodes = np.ascontiguousarray(topology.crack_nodes, dtype=np.int32)
+        self.strength_multiplier = self.heterogeneity.draw(tag)
+        self._strength_factor = 1.0
+
+        # Small property table indexed by tag: [f_t, c, tan(phi), G_I, G_II, kind, tan(phi_res)].
+        n_tags = int(max(self.property_sets)) + 1 if self.property_sets else 1
+        self.props = np.zeros((n_tags, 7))
+        for t, p in self.property_sets.items():
+            self.props[t] = [p.f_t, p.c, p.tan_phi, p.G_I, p.G_II, SOFTENING_KINDS[p.softening], p.tan_phi_res]
+        self.kn = np.empty(n)
+        self.kt = np.empty(n)
+        for t in present:
+            sel = tag == t
+            self.kn[sel], self.kt[sel] = self.property_sets[int(t)].stiffness(self.length0[sel])
+        self._check_snap_back(1.0)
+
+        # Internal element order: colour-major for the colour scheme, so that every colour
+        # pass streams its rows contiguously; identity for the gather scheme. Public arrays
+        # (damage, broken, events) are in topology order.
+        tris = np.ascontiguousarray(topology.crack_triangles, dtype=np.int64)
+        if scheme == "colour":
+            colour = K.colour_elements(tris, topology.n_triangles)
+            self._perm = np.argsort(colour, kind="stable").astype(np.int64)
+            self._colour = np.ascontiguousarray(colour[self._perm])
+        else:
+            self._perm = np.arange(n, dtype=np.int64)
+            self._colour = np.zeros(n, dtype=np.int32)
+        self._inv = np.empty(n, dtype=np.int64)
+        self._inv[self._perm] = np.arange(n)
+        self._nodes = np.ascontiguousarray(self.nodes[self._perm])
+
+        self._const = np.zeros((n, K.N_CONST))
+        self._fill_constants()
+        self._status = np.zeros(n, dtype=np.int8)
+        self._state = np.zeros((n, K.N_STATE))
+        self._diss = np.zeros((n, 3))
+        self.broken = np.zeros(n, dtype=bool)
+        self._broke_flag = np.zeros(n, dtype=np.int8)
+        self.released = 0.0
+        self.newly_broken = np.zeros(0, dtype=np.int64)
+        self._events: list[tuple] = []
+        self._events_arr: np.ndarray | None = None
+        self._time = 0.0
+        self._last_step: int | None = None
+        self._x_last: np.ndarray | None = None
+
+        if scheme == "gather":
+            self._fe = np.zeros((n, 4))
+            self._node_map = np.full((topology.n_nodes, 2), -1, dtype=np.int64)
+            codes = (4 * np.arange(n)[:, None] + np.arange(4)[None, :]).ravel()
+            nodes_flat = self._nodes.ravel().astype(np.int64)
+            order = np.argsort(nodes_flat, kind="stable")
+            nf, cf = nodes_flat[order], codes[order]
+            first = np.r_[True, nf[1:] != nf[:-1]]
+            rank = np.arange(nf.size) - np.maximum.accumulate(np.where(first, np.arange(nf.size), 0))
+            if np.any(rank > 1):
+                raise ValueError("a node belongs to more than two crack elements: topology is not exploded")
+            self._node_map[nf, rank] = cf
+        self._set_active(np.arange(n, dtype=np.int64))
+
+    # ------------------------------------------------------------------ constants
+    def _element_strengths(self, factor: float) -> tuple[np.ndarray, ...]:
+        P = self.props[self.tag]
+        h = self.strength_multiplier
+        return P[:, 0] * h * factor, P[:, 1] * h * factor, P[:, 2] * factor, P[:, 3], P[:, 4], P[:, 5]
+
+    def _check_snap_back(self, factor: float) -> None:
+        """G must exceed the elastic energy at the peak, or the softening branch snaps back.
+
+        Mode I: ``G_I > f_t^2 / (2 k_n)`` (so that ``o_r > o_p``). Mode II (plastic cohesive
+        slip, slip-controlled): ``G_II > c^2 Zbar max|z'| / k_t`` (``= c^2/(2 k_t)`` for linear
+        softening). Checked with the strongest element and the softest penalty of each set.
+        """
+        ft, c, _, GI, GII, kind = self._element_strengths(factor)
+        for t, p in self.property_sets.items():
+            sel = np.flatnonzero(self.tag == t)
+            if sel.size == 0:
+                continue
+            label = f"property set {t} ({p.name or ('intact' if t == INTACT else f'joint set {t}')})"
+            need_I = ft[sel] ** 2 / (2.0 * self.kn[sel])
+            i = int(np.argmax(need_I))
+            if not GI[sel[i]] > need_I[i]:
+                raise ValueError(
+                    f"{label}: G_I = {p.G_I:.6g} J/m^2 is too small for f_t = {ft[sel[i]]:.6g} Pa and "
+                    f"k_n = {self.kn[sel[i]]:.6g} Pa/m (element {sel[i]}, L0 = {self.length0[sel[i]]:.4g} m): the "
+                    f"softening branch would snap back; smallest admissible G_I is {need_I[i]:.6g} J/m^2 "
+                    f"(raise G_I or the normal penalty)")
+            zs = softening_integral(p.softening) * softening_max_slope(p.softening)
+            need_II = zs * c[sel] ** 2 / self.kt[sel]
+            i = int(np.argmax(need_II))
+            if c[sel[i]] > 0 and not GII[sel[i]] > need_II[i]:
+                raise ValueError(
+                    f"{label}: G_II = {p.G_II:.6g} J/m^2 is too small for c = {c[sel[i]]:.6g} Pa and "
+                    f"k_t = {self.kt[sel[i]]:.6g} Pa/m (element {sel[i]}, L0 = {self.length0[sel[i]]:.4g} m): the "
+                    f"softening branch would snap back; smallest admissible G_II is {need_II[i]:.6g} J/m^2 "
+                    f"(raise G_II or the tangential penalty)")
+
+    def _fill_constants(self) -> None:
+        ft, c, tanphi, GI, GII, kind = self._element_strengths(self._strength_factor)
+        w = 0.5 * self.length0
+        zbar = np.where(kind == K.LINEAR, softening_integral("linear"), softening_integral("munjiza"))
+        dO = (GI - ft ** 2 / (2.0 * self.kn)) / (ft * zbar)
+        with np.errstate(divide="ignore"):
+            inv_dK = np.where(c > 0, c * zbar / np.where(GII > 0, GII, 1.0), 0.0)
+        C = np.empty_like(self._const)
+        C[:, 0] = self.kn * w
+        C[:, 1] = self.kt * w
+        C[:, 2] = ft / self.kn
+        C[:, 3] = c * w
+        C[:, 4] = tanphi
+        C[:, 5] = 1.0 / dO
+        C[:, 6] = inv_dK
+        C[:, 7] = kind
+        self._const[:] = C[self._perm]
+
+    def scale_strength(self, factor: float) -> None:
+        """Set ``f_t``, ``c`` and ``tan(phi)`` (and the residual friction) to ``factor`` times
+        their initial values (``factor = 1/SRF``; absolute, not cumulative). Fracture energies
+        and penalties are kept; damage already done stays. No recompilation: only the numbers
+        in the per-element constant rows change."""
+        if not (math.isfinite(factor) and factor > 0):
+            raise ValueError(f"strength factor must be positive and finite, got {factor}")
+        self._check_snap_back(factor)
+        self._strength_factor = float(factor)
+        self._fill_constants()
+
+    @property
+    def strength_factor(self) -> float:
+        return self._strength_factor
+
+    @property
+    def residual_friction(self) -> np.ndarray:
+        """(n,) friction coefficient ``tan(phi_res)`` (times the strength factor) that contact
+        should use on the faces of each broken element."""
+        return self.props[self.tag, 6] * self._strength_factor
+
+    # ------------------------------------------------------------------ active list
+    def _set_active(self, alive: np.ndarray) -> None:
+        """``alive``: sorted internal ids of the live elements (colour-major already)."""
+        self._active = np.ascontiguousarray(alive, dtype=np.int64)
+        n_col = int(self._colour.max()) + 1 if self._colour.size else 1
+        self._colour_ptr = np.searchsorted(self._colour[self._active], np.arange(n_col + 1)).astype(np.int64)
+        if self.scheme == "gather":
+            self._node_list = np.unique(self._nodes[self._active].ravel()).astype(np.int64)
+
+    @property
+    def active(self) -> np.ndarray:
+        """Topology ids of the live (unbroken) crack elements."""
+        return self._perm[self._active]
+
+    @property
+    def n_active(self) -> int:
+        return int(self._active.shape[0])
+
+    @property
+    def n_cracks(self) -> int:
+        return int(self.tag.shape[0])
+
+    @property
+    def n_colours(self) -> int:
+        return int(self._colour_ptr.shape[0] - 1)
+
+    # ------------------------------------------------------------------ force provider
+    def add_forces(self, x: np.ndarray, v: np.ndarray, f: np.ndarray, dt: float, step: int) -> None:
+        """Add the crack forces on the nodes into ``f`` (n_nodes, 2) [N/m] and update damage.
+
+        ``x`` (n_nodes, 2) current positions [m]; ``v`` is unused (the law is rate
+        independent); ``dt`` [s] and ``step`` time-stamp fracture events (time advances by
+        ``dt`` per new step number). Elements reaching ``D >= 1`` at both ends break: they add
+        no force from this call on, leave the active list and are recorded in :attr:`events`.
+        """
+        if self._last_step is None:
+            self._time = step * dt
+        elif step != self._last_step:
+            self._time += (step - self._last_step) * dt
+        self._last_step = step
+        self._x_last = x
+        if self._active.size == 0:
+            self.newly_broken = np.zeros(0, dtype=np.int64)
+            return
+        if self._active.size < self.parallel_min:
+            nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
+                                       self._active, self._broke_flag)
+        elif self.scheme == "colour":
+            nb = K.crack_forces_coloured(x, f, self._nodes, self._const, self._status, self._state, self._diss,
+                                         self._active, self._colour_ptr, self._broke_flag)
+        else:
+            nb = K.crack_forces_store(x, self._nodes, self._const, self._status, self._state, self._diss,
+                                      self._active, self._fe, self._broke_flag)
+            K.gather_node_forces(f, self._node_list, self._node_map, self._fe)
+        if nb:
+            self._register_breaks(x, step)
+        else:
+            self.newly_broken = np.zeros(0, dtype=np.int64)
+
+    def _register_breaks(self, x: np.ndarray, step: int) -> None:
+        new = np.flatnonzero(self._broke_flag[self._active]).astype(np.int64)
+        ids = self._active[new]
+        self._broke_flag[ids] = 0
+        topo_ids = self._perm[ids]
+        self.broken[topo_ids] = True
+        # Elastic energy still held at breakage (e.g. friction stress, closure) is released.
+        self.released += K.crack_elastic_energy(x, self._nodes, self._const, self._state, ids)
+        mid = 0.25 * x[self._nodes[ids]].sum(axis=1)
+        wI, wII = self._diss[ids, 0], self._diss[ids, 1]
+        # Mode from the elliptical damage at failure: share of xi_II^2 in D^2, averaged over ends.
+        share = np.zeros(ids.size)
+        for e in (0, 1):
+            D = np.maximum(self._state[ids, 3 * e], 1e-300)
+            xi2 = self._state[ids, 3 * e + 1] * self._const[ids, 6]
+            share += 0.5 * np.minimum((xi2 / D) ** 2, 1.0)
+        mode = np.where(share < MODE_SHARE, "I", np.where(share > 1 - MODE_SHARE, "II", "mixed"))
+        for k in np.argsort(topo_ids):
+            c = int(topo_ids[k])
+            self._events.append((c, int(step), self._time, mid[k, 0], mid[k, 1], mode[k],
+                                 int(self.tag[c]), self.length0[c], wI[k] + wII[k], wI[k], wII[k]))
+        self.newly_broken = np.sort(topo_ids)
+        self._events_arr = None
+        self._set_active(np.delete(self._active, new))
+
+    @property
+    def events(self) -> np.ndarray:
+        """Fracture events so far, a structured array of :data:`EVENT_DTYPE`."""
+        if self._events_arr is None:
+            self._events_arr = np.array(self._events, dtype=EVENT_DTYPE)
+        return self._events_arr
+
+    @property
+    def damage(self) -> np.ndarray:
+        """(n,) element damage in [0, 1]: the larger of its two ends (1 for broken elements)."""
+        return np.minimum(self._state[self._inv][:, [0, 3]].max(axis=1), 1.0)
+
+    @property
+    def damage_ip(self) -> np.ndarray:
+        """(n, 2) damage at the two integration points (element ends 0-3 and 1-2)."""
+        return np.minimum(self._state[self._inv][:, [0, 3]], 1.0)
+
+    @property
+    def dissipated(self) -> np.ndarray:
+        """(n, 3) energy dissipated by each element [J/m]: mode I, cohesive mode II, friction."""
+        return self._diss[self._inv]
+
+    def crack_fields(self) -> dict[str, np.ndarray]:
+        """(n,) arrays for the crack line cells of the output: ``damage``, ``broken`` (0/1),
+        ``fracture_energy`` (mode I + II dissipated per element [J/m]), ``strength_multiplier``."""
+        d = self.dissipated
+        return {
+            "damage": self.damage,
+            "broken": self.broken.astype(np.int8),
+            "fracture_energy": d[:, 0] + d[:, 1],
+            "strength_multiplier": self.strength_multiplier,
+        }
+
+    def energy_terms(self) -> dict[str, float]:
+        """Energy terms for the ledger [J per metre of thickness].
+
+        ``crack_elastic``: stored in the live elements (configuration of the last
+        :meth:`add_forces`; call it right after). Cumulative dissipation: ``fracture`` (mode I
+        + cohesive mode II, the ``G`` areas), ``crack_friction`` (``sigma_n tan(phi)`` times
+        plastic slip inside unbroken elements), ``crack_released`` (elastic energy the
+        elements held when they broke, handed over with the faces).
+        """
+        el = 0.0
+        if self._x_last is not None and self._active.size:
+            el = float(K.crack_elastic_energy(self._x_last, self._nodes, self._const, self._state, self._active))
+        return {
+            "crack_elastic": el,
+            "fracture": float(self._diss[:, 0].sum() + self._diss[:, 1].sum()),
+            "crack_friction": float(self._diss[:, 2].sum()),
+            "crack_released": float(self.released),
+        }
+
+    def stable_dt(self, mass: np.ndarray) -> float:
+        """Critical time step of the crack penalties alone [s]: ``2 / omega_max`` with
+        ``omega^2 <= K_a/m_a + K_b/m_b`` per node pair, ``K`` the summed end stiffness
+        ``max(k_n, k_t) L0/2`` [N/m] on a node, ``m`` the node mass [kg/m]. Apply a safety
+        factor in the solver (and take the minimum with the triangles' and contact's)."""
+        mass = np.asarray(mass, dtype=np.float64)
+        if mass.shape != (self.topology.n_nodes,):
+            raise ValueError(f"mass must have shape ({self.topology.n_nodes},), got {mass.shape}")
+        if self._active.size == 0:
+            return math.inf
+        return float(K.stable_dt_kernel(mass, self._nodes, self._const, self._active, self.topology.n_nodes))

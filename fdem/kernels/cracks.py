@@ -1,0 +1,439 @@
+"""Numba kernels for the four-node cohesive crack element.
+
+Arrays in, arrays out; the Python side (:mod:`fdem.cohesive`) owns the data and unpacks it.
+
+Layout (``n`` crack elements, ``m`` exploded nodes)
+---------------------------------------------------
+``nodes : (n, 4) int32``
+    ``[A_p, A_q, B_q, B_p]`` (see :mod:`fdem.topology`). End 0 of the element is the node pair
+    (0, 3), end 1 the pair (1, 2); the integration points are these two ends.
+``const : (n, 8) float64``
+    Per-element constants, one 64-byte row, already multiplied by the end weight ``w = L0/2``
+    where marked ``*w``:
+
+    ====  ===========  ===============================================================
+    col   symbol       meaning
+    ====  ===========  ===============================================================
+    0     ``Kn``       normal penalty stiffness of one end, ``k_n w`` [N/m]  (``*w``)
+    1     ``Kt``       tangential penalty stiffness, ``k_t w`` [N/m]          (``*w``)
+    2     ``op``       opening at the tensile peak ``o_p = f_t / k_n`` [m]
+    3     ``C``        cohesion force, ``c w`` [N]                            (``*w``)
+    4     ``tanphi``   friction coefficient ``tan(phi)`` [-]
+    5     ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage [1/m]
+    6     ``inv_dK``   ``1/kappa_r``, inverse plastic slip to full damage [1/m] (0: no cohesion)
+    7     ``kind``     softening shape: 0 Munjiza (Evans-Marathe), 1 linear
+    ====  ===========  ===============================================================
+
+    A strength reduction or heterogeneity changes the numbers in these rows, never the code.
+``status : (n,) int8``
+    0 while the element has never left the elastic range (its ``state`` row is then all
+    zero and is not read), 1 after it first damaged or slid.
+``state : (n, 6) float64``
+    ``[D, kappa, s_pl]`` of end 0 then of end 1: damage (never decreases, >= 1 is fully
+    damaged), accumulated plastic slip [m], signed plastic slip [m].
+``diss : (n, 3) float64``
+    Energy dissipated by each element [J per metre of thickness]: mode-I (normal damage),
+    mode-II (cohesive part of the shear strength), friction inside the intact element.
+
+The law (per integration point, per unit area; Munjiza 2004 ch. 7; Munjiza, Andrews & White
+1999; Lisjak et al. 2014, elliptical mixed-mode interaction) is documented in
+:func:`point_law` and in ``docs/cohesive.md``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# Evans-Marathe softening constants used by Munjiza (2004, ch. 7): a, b, c.
+EM_A = 0.63
+EM_B = 1.8
+EM_C = 6.0
+
+MUNJIZA = 0
+LINEAR = 1
+
+N_CONST = 8
+N_STATE = 6
+PARALLEL_MIN = 4096
+"""Below this many live elements the serial loop is used (a parallel region costs more)."""
+
+
+@njit(cache=True, fastmath=True)
+def softening(D, kind):
+    """Normalised softening curve ``z(D)`` with ``z(0) = 1``, ``z(1) = 0``, ``z' <= 0``.
+
+    Munjiza (Evans & Marathe 1968, as used in Munjiza 2004, sec. 7.2 and Munjiza, Andrews &
+    White 1999)::
+
+        z(D) = [1 - (a+b-1)/(a+b) exp(D (a + c b) / ((a+b)(1-a-b)))] [a (1-D) + b (1-D)^c]
+
+    with ``a = 0.63, b = 1.8, c = 6``; ``z'(0) = 0`` and ``int_0^1 z dD = 0.38631``.
+    Linear: ``z(D) = 1 - D``. ``D`` is clamped to [0, 1]. Dimensionless.
+    """
+    d = min(max(D, 0.0), 1.0)
+    if kind == LINEAR:
+        return 1.0 - d
+    e = 1.0 - d
+    e2 = e * e
+    e6 = e2 * e2 * e2
+    ab = EM_A + EM_B
+    first = 1.0 - (ab - 1.0) / ab * math.exp(d * (EM_A + EM_C * EM_B) / (ab * (1.0 - ab)))
+    return first * (EM_A * e + EM_B * e6)
+
+
+@njit(cache=True, fastmath=True)
+def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
+    """Cohesive law at one integration point: tractions and the updated state.
+
+    Inputs are the opening ``o`` (>0 opens) and slip ``s`` [m] at the point, the state
+    ``D, kap, sp`` and the constants: penalties ``Kn, Kt``, peak opening ``op = Ft/Kn``,
+    cohesion ``C``, ``tanphi``, ``inv_dO = 1/(o_r - o_p)``, ``inv_dK = 1/kappa_r``, softening
+    ``kind``. Stiffnesses, strengths and energies are per unit area, or all multiplied by the
+    point weight ``w`` (the law is homogeneous in that scaling).
+
+    Law (derived in ``docs/cohesive.md``)::
+
+        xi_I = max(o - o_p, 0) / (o_r - o_p)       normalised post-peak opening
+        xi_II = kap / kappa_r                       normalised cohesive plastic slip
+        D'   = max(D, sqrt(xi_I^2 + xi_II^2))       elliptical mixed mode, never heals
+        normal:  sigma = Kn o                       (o <= 0, full penalty in compression)
+                 sigma = z(D') Ft o / (o_p + D' (o_r - o_p))   (o > 0: secant, damaged stiffness)
+        shear:   tau_tr = Kt (s - sp)
+                 F = z(D') C + max(-sigma, 0) tanphi          Mohr-Coulomb, tension cut-off
+                 excess = max(|tau_tr| - F, 0)                 return map (plastic slip)
+                 tau = tau_tr - sign(tau_tr) excess;  kap += excess/Kt;  sp += sign excess/Kt
+
+    In pure mode I the envelope is ``sigma = Ft z(D)`` at ``o = o_p + D (o_r - o_p)``, area
+    ``Ft o_p/2 + Ft (o_r - o_p) Zbar = G_I``; in pure mode II the cohesive part softens as
+    ``C z(kap/kappa_r)``, area ``C kappa_r Zbar = G_II``; the frictional part
+    ``sigma_n tanphi`` is dissipated as friction and never softens (residual = contact).
+    The shear strength uses the damage of the previous plastic slip (one-step lag, an O(step)
+    error that vanishes with the explicit time step).
+
+    Returns ``(sigma, tau, D', kap', sp', dW_I, dW_II, dW_fric)``: tractions (tension and
+    slip-resisting positive) and the energy dissipated in this update by normal damage, by the
+    cohesive part and by friction [J/m^2, or J when the constants carry ``w``].
+    """
+    sig_e = Kn * o
+    ttr = Kt * (s - sp)
+    # Fast path, taken by nearly every element: intact, below the tensile peak, elastic shear.
+    if D == 0.0 and kap == 0.0 and o <= op:
+        if abs(ttr) <= C + max(-sig_e, 0.0) * tanphi:
+            return sig_e, ttr, 0.0, 0.0, sp, 0.0, 0.0, 0.0
+    return _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+
+
+@njit(cache=True, fastmath=True)
+def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
+    """Damaging / sliding branch of :func:`point_law` (same law, general case)."""
+    Ft = Kn * op
+    dO = 1.0 / inv_dO
+    xi1 = max(o - op, 0.0) * inv_dO
+    xi2 = kap * inv_dK
+    q = xi1 * xi1 + xi2 * xi2
+    Dn = D
+    if q > D * D:
+        Dn = math.sqrt(q)
+    opos = max(o, 0.0)
+    oneg = min(o, 0.0)
+    if Dn > 0.0:
+        z = softening(Dn, kind)
+        sec = z * Ft / (op + Dn * dO)
+    else:
+        z = 1.0
+        sec = Kn
+    sig = sec * opos + Kn * oneg
+    dWI = 0.0
+    if Dn > D:
+        sec_old = Kn
+        if D > 0.0:
+            sec_old = softening(D, kind) * Ft / (op + D * dO)
+        # Work of the traction over the step minus the change of stored energy, with the
+        # opening at the start of the step estimated by the envelope point of D (exact for
+        # monotonic mode I, and for fixed opening): dW = (sec_old - sec) o_ref o / 2.
+        oref = min(op + D * dO, opos)
+        dWI = 0.5 * (sec_old - sec) * oref * opos
+    att = abs(ttr)
+    fric = max(-sig, 0.0) * tanphi
+    F = z * C + fric
+    excess = max(att - F, 0.0)
+    sgn = 1.0 if ttr >= 0.0 else -1.0
+    tau = ttr - sgn * excess
+    dk = excess / Kt
+    dWII = z * C * dk
+    dWf = fric * dk
+    return sig, tau, Dn, kap + dk, sp + sgn * dk, dWI, dWII, dWf
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def element_update(c, x, nodes, const, status, state, diss):
+    """One crack element: kinematics, the law at both ends, state update.
+
+    Tangent ``t`` along the mid-line of the two faces, ``t = (m1 - m0)/|m1 - m0|`` with
+    ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``; normal ``n = (t_y, -t_x)`` (A into B).
+    Separation at end 0: ``d0 = x3 - x0``, end 1: ``d1 = x2 - x1``; ``o = d.n``, ``s = d.t``.
+
+    Returns ``(broke, F0x, F0y, F1x, F1y)``: ``F_i = sigma_i n + tau_i t`` [N/m] is the force on
+    the A node of end ``i``; the B node gets ``-F_i``. ``broke`` is True when both ends reached
+    ``D >= 1`` in this update (forces are then zero: the faces belong to contact).
+    """
+    i0 = nodes[c, 0]
+    i1 = nodes[c, 1]
+    i2 = nodes[c, 2]
+    i3 = nodes[c, 3]
+    x0 = x[i0, 0]
+    y0 = x[i0, 1]
+    x1 = x[i1, 0]
+    y1 = x[i1, 1]
+    x2 = x[i2, 0]
+    y2 = x[i2, 1]
+    x3 = x[i3, 0]
+    y3 = x[i3, 1]
+    mx = 0.5 * (x1 + x2 - x0 - x3)
+    my = 0.5 * (y1 + y2 - y0 - y3)
+    inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
+    tx = mx * inv
+    ty = my * inv
+    nx = ty
+    ny = -tx
+    d0x = x3 - x0
+    d0y = y3 - y0
+    d1x = x2 - x1
+    d1y = y2 - y1
+    o0 = d0x * nx + d0y * ny
+    s0 = d0x * tx + d0y * ty
+    o1 = d1x * nx + d1y * ny
+    s1 = d1x * tx + d1y * ty
+
+    Kn = const[c, 0]
+    Kt = const[c, 1]
+    op = const[c, 2]
+    C = const[c, 3]
+    tanphi = const[c, 4]
+    # Fast path of point_law for both ends at once (nearly every element, every step): an
+    # element that never left the elastic range (status 0: D = kappa = s_pl = 0) and stays
+    # below the tensile peak and inside the Mohr-Coulomb envelope. Reads no state, stores nothing.
+    sig0 = Kn * o0
+    tau0 = Kt * s0
+    sig1 = Kn * o1
+    tau1 = Kt * s1
+    elastic = ((status[c] == 0) & (o0 <= op) & (o1 <= op)
+               & (abs(tau0) <= C + max(-sig0, 0.0) * tanphi) & (abs(tau1) <= C + max(-sig1, 0.0) * tanphi))
+    broke = False
+    if not elastic:
+        status[c] = 1
+        inv_dO = const[c, 5]
+        inv_dK = const[c, 6]
+        kind = int(const[c, 7])
+        sig0, tau0, Dn0, kn0, sn0, wI0, wII0, wf0 = point_law(
+            o0, s0, state[c, 0], state[c, 1], state[c, 2], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+        sig1, tau1, Dn1, kn1, sn1, wI1, wII1, wf1 = point_law(
+            o1, s1, state[c, 3], state[c, 4], state[c, 5], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+        state[c, 0] = Dn0
+        state[c, 1] = kn0
+        state[c, 2] = sn0
+        state[c, 3] = Dn1
+        state[c, 4] = kn1
+        state[c, 5] = sn1
+        diss[c, 0] += wI0 + wI1
+        diss[c, 1] += wII0 + wII1
+        diss[c, 2] += wf0 + wf1
+        broke = Dn0 >= 1.0 and Dn1 >= 1.0
+    keep = 0.0 if broke else 1.0
+    F0x = keep * (sig0 * nx + tau0 * tx)
+    F0y = keep * (sig0 * ny + tau0 * ty)
+    F1x = keep * (sig1 * nx + tau1 * tx)
+    F1y = keep * (sig1 * ny + tau1 * ty)
+    return broke, F0x, F0y, F1x, F1y
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def crack_forces_coloured(x, f, nodes, const, status, state, diss, active, colour_ptr, broke_flag):
+    """Add crack forces into ``f`` (n_nodes, 2) [N/m], colour by colour.
+
+    ``active`` holds the live element ids grouped by colour, colour ``k`` in
+    ``active[colour_ptr[k]:colour_ptr[k+1]]``; elements of one colour share no node, so each
+    colour is scattered in parallel without races. Elements that break set
+    ``broke_flag[c] = 1``. Returns the number of elements that broke.
+    """
+    nb = 0
+    for k in range(colour_ptr.shape[0] - 1):
+        for j in prange(colour_ptr[k], colour_ptr[k + 1]):
+            c = active[j]
+            broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+            i0 = nodes[c, 0]
+            i1 = nodes[c, 1]
+            i2 = nodes[c, 2]
+            i3 = nodes[c, 3]
+            f[i0, 0] += F0x
+            f[i0, 1] += F0y
+            f[i3, 0] -= F0x
+            f[i3, 1] -= F0y
+            f[i1, 0] += F1x
+            f[i1, 1] += F1y
+            f[i2, 0] -= F1x
+            f[i2, 1] -= F1y
+            if broke:
+                broke_flag[c] = 1
+                nb += 1
+    return nb
+
+
+@njit(cache=True, fastmath=True)
+def crack_forces_serial(x, f, nodes, const, status, state, diss, active, broke_flag):
+    """Serial version of :func:`crack_forces_coloured` for small active sets (no threading
+    overhead; any element order is race-free on one thread)."""
+    nb = 0
+    for j in range(active.shape[0]):
+        c = active[j]
+        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+        i0 = nodes[c, 0]
+        i1 = nodes[c, 1]
+        i2 = nodes[c, 2]
+        i3 = nodes[c, 3]
+        f[i0, 0] += F0x
+        f[i0, 1] += F0y
+        f[i3, 0] -= F0x
+        f[i3, 1] -= F0y
+        f[i1, 0] += F1x
+        f[i1, 1] += F1y
+        f[i2, 0] -= F1x
+        f[i2, 1] -= F1y
+        if broke:
+            broke_flag[c] = 1
+            nb += 1
+    return nb
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def crack_forces_store(x, nodes, const, status, state, diss, active, fe, broke_flag):
+    """Per-element pass of the store-and-gather scheme: ``fe[c] = [F0x, F0y, F1x, F1y]``.
+
+    Returns the number of elements that broke (their ``fe`` row is zero from then on).
+    """
+    nb = 0
+    for j in prange(active.shape[0]):
+        c = active[j]
+        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+        fe[c, 0] = F0x
+        fe[c, 1] = F0y
+        fe[c, 2] = F1x
+        fe[c, 3] = F1y
+        if broke:
+            broke_flag[c] = 1
+            nb += 1
+    return nb
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def gather_node_forces(f, node_list, node_map, fe):
+    """Gather pass: ``f[n] += sum of the (at most 2) element-end forces on node n``.
+
+    ``node_map[n, k] = 4 c + slot`` (slot 0..3 in ``[A_p, A_q, B_q, B_p]``) or -1. Slots 0/3
+    take ``+/-`` end 0 of ``fe``, slots 1/2 take ``+/-`` end 1.
+    """
+    for j in prange(node_list.shape[0]):
+        n = node_list[j]
+        fx = 0.0
+        fy = 0.0
+        for k in range(2):
+            code = node_map[n, k]
+            if code >= 0:
+                c = code >> 2
+                slot = code & 3
+                end = 1 if (slot == 1 or slot == 2) else 0
+                sgn = 1.0 if slot < 2 else -1.0
+                fx += sgn * fe[c, 2 * end]
+                fy += sgn * fe[c, 2 * end + 1]
+        f[n, 0] += fx
+        f[n, 1] += fy
+
+
+@njit(cache=True)
+def colour_elements(crack_triangles, n_tri):
+    """Greedy colouring so that no two elements of one colour share a node.
+
+    Two crack elements share a node exactly when they border the same triangle (the mesh is
+    exploded), so the conflict graph is the line graph of the triangle adjacency graph
+    (degree <= 3): greedy needs at most 5 colours, usually 4. Returns (n,) int32 colours.
+    """
+    used = np.zeros(n_tri, dtype=np.int32)  # bit mask of colours used around each triangle
+    col = np.empty(crack_triangles.shape[0], dtype=np.int32)
+    for c in range(crack_triangles.shape[0]):
+        a = crack_triangles[c, 0]
+        b = crack_triangles[c, 1]
+        m = used[a] | used[b]
+        k = 0
+        while (m >> k) & 1:
+            k += 1
+        col[c] = k
+        used[a] |= 1 << k
+        used[b] |= 1 << k
+    return col
+
+
+@njit(cache=True, fastmath=True)
+def crack_elastic_energy(x, nodes, const, state, active):
+    """Elastic energy stored in the live elements [J/m]: per end
+    ``sec o+^2/2 + Kn o-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)``."""
+    e = 0.0
+    for j in range(active.shape[0]):
+        c = active[j]
+        i0 = nodes[c, 0]
+        i1 = nodes[c, 1]
+        i2 = nodes[c, 2]
+        i3 = nodes[c, 3]
+        mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
+        my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
+        inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
+        tx = mx * inv
+        ty = my * inv
+        Kn = const[c, 0]
+        Kt = const[c, 1]
+        op = const[c, 2]
+        Ft = Kn * op
+        dO = 1.0 / const[c, 5]
+        kind = int(const[c, 7])
+        for end in range(2):
+            if end == 0:
+                dx = x[i3, 0] - x[i0, 0]
+                dy = x[i3, 1] - x[i0, 1]
+            else:
+                dx = x[i2, 0] - x[i1, 0]
+                dy = x[i2, 1] - x[i1, 1]
+            o = dx * ty - dy * tx
+            s = dx * tx + dy * ty
+            D = state[c, 3 * end]
+            sec = Kn
+            if D > 0.0:
+                sec = softening(D, kind) * Ft / (op + D * dO)
+            op_ = max(o, 0.0)
+            on_ = min(o, 0.0)
+            tau = Kt * (s - state[c, 3 * end + 2])
+            e += 0.5 * sec * op_ * op_ + 0.5 * Kn * on_ * on_ + 0.5 * tau * tau / Kt
+    return e
+
+
+@njit(cache=True)
+def stable_dt_kernel(mass, nodes, const, active, n_nodes):
+    """Critical step of the crack springs: ``dt = min 2 / sqrt(K_a/m_a + K_b/m_b)`` over the
+    node pairs of live elements, where ``K_node`` sums ``max(Kn, Kt)`` of the (<= 2) elements
+    on the node (a Gershgorin bound on the highest frequency of the crack springs alone)."""
+    K = np.zeros(n_nodes)
+    for j in range(active.shape[0]):
+        c = active[j]
+        k = max(const[c, 0], const[c, 1])
+        for q in range(4):
+            K[nodes[c, q]] += k
+    dt = np.inf
+    for j in range(active.shape[0]):
+        c = active[j]
+        for a, b in ((0, 3), (1, 2)):
+            na = nodes[c, a]
+            nb = nodes[c, b]
+            w2 = K[na] / mass[na] + K[nb] / mass[nb]
+            if w2 > 0.0:
+                dt = min(dt, 2.0 / math.sqrt(w2))
+    return dt
