@@ -1,0 +1,448 @@
+"""Contact between free triangle faces: broad phase, pair bookkeeping, the ``ContactSet`` force provider.
+
+Which triangles take part
+-------------------------
+Only *contactors* can touch anything: triangles with an external edge (``boundary_triangle``)
+and triangles on either side of a broken crack element (added by :meth:`ContactSet.activate_cracks`).
+Two triangles still joined by an intact crack element never form a pair (the crack element
+carries their interaction); once it breaks they do.
+
+Broad phase
+-----------
+Boxes of the contactors, grown by half the skin, are binned into a uniform grid by a counting
+sort (O(n)); each pair is reported once (from the cell holding the lower-left corner of the
+two boxes' intersection), so the result equals the brute-force all-pairs search for any cell
+size (:func:`fdem.kernels.contact.brute_force_pairs` is kept as the reference). The search is
+re-run only when some contactor node has moved more than half the skin since the last one:
+until then no pair missing from the list can have come into touch.
+
+Narrow phase and friction
+-------------------------
+Distributed-potential penalty (Munjiza & Andrews 2000; Munjiza 2004 ch. 3): see
+:mod:`fdem.kernels.contact`. Friction is a tangential penalty per pair, capped by Coulomb
+``mu |F_n|`` (incremental, return mapping), acting at the centroid of the overlap on both
+triangles (equal and opposite, at the same point: no spurious torque). Its stiffness is a
+fraction of the pair's current secant normal stiffness. The tangential force (the slip history)
+is kept per pair across steps and across re-searches (keyed by the triangle pair) and dropped
+when the pair separates. Optional normal viscous damping ``c_n = 2 xi sqrt(k m_eff)`` with the
+pair's current secant stiffness ``k = F_n^2 / (2 E_pair)`` and ``m_eff`` the reduced mass of the
+two triangles (never attractive beyond the elastic push).
+
+Use
+---
+::
+
+    topo = build_topology(mesh)
+    contact = ContactSet(topo, penalty=50 * E, friction_angle=35.0, mass=nodal_mass,
+                         damping_ratio=0.0)
+    dt = safety * min(dt_elements, dt_cracks, contact.stable_dt(nodal_mass))
+    # each step (forces ON nodes, added into f):
+    contact.add_forces(x, v, f, dt, step)
+    # when crack elements break:
+    contact.activate_cracks(broken_ids, friction_angle=joint_phi_of_those_cracks)
+    ledger.update(contact.energy_terms())
+"""
+from __future__ import annotations
+
+from typing import Iterable
+
+import numpy as np
+
+from .kernels import contact as kc
+from .topology import Topology, triangle_areas
+
+__all__ = ["ContactSet", "pair_energy_force", "candidate_pairs", "brute_force_candidate_pairs"]
+
+
+# ----------------------------------------------------------------------------- small helpers
+def pair_energy_force(xc: np.ndarray, xt: np.ndarray, penalty: float) -> tuple[float, np.ndarray, np.ndarray, float]:
+    """Energy and nodal forces of one triangle pair (the per-pair law, for tests and tools).
+
+    ``xc``, ``xt``: (3, 2) corners of the two triangles, counter-clockwise [m]; ``penalty`` [Pa].
+    Returns ``(E [J/m], f_c (3, 2), f_t (3, 2) [N/m], overlap area [m^2])``.
+    """
+    xc = np.asarray(xc, dtype=np.float64)
+    xt = np.asarray(xt, dtype=np.float64)
+    origin = xc.mean(axis=0)
+    pts = np.concatenate([(xc - origin).ravel(), (xt - origin).ravel()])
+    out = np.zeros((1, kc.N_OUT))
+    e = kc.pair_normal(pts, float(penalty), out, 0, np.empty(kc.N_SCRATCH), np.empty((2, kc.MAX_POLY, kc.N_COL)))
+    return float(e), out[0, 0:6].reshape(3, 2).copy(), out[0, 6:12].reshape(3, 2).copy(), float(out[0, 12])
+
+
+def _bond_table(topology: Topology, intact: np.ndarray) -> np.ndarray:
+    """(n_tri, 3) triangle bonded to each triangle across its edge k by an intact crack, else -1."""
+    bond = np.full((topology.n_triangles, 3), -1, dtype=np.int64)
+    cn = topology.crack_nodes[intact]
+    ct = topology.crack_triangles[intact]
+    # crack_nodes = [A_p, A_q, B_q, B_p]: A_p = 3A + k is the start of A's edge k, B_q of B's.
+    bond[ct[:, 0], cn[:, 0] % 3] = ct[:, 1]
+    bond[ct[:, 1], cn[:, 2] % 3] = ct[:, 0]
+    return bond
+
+
+def candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: float,
+                    cell_size: float | None = None, max_cells_per_box: float = 4.0) -> np.ndarray:
+    """(n_pairs, 2) candidate pairs ``i < j`` by the binned grid, sorted (see module docstring)."""
+    active = np.ascontiguousarray(np.sort(np.asarray(active, dtype=np.int64)))
+    box = kc.triangle_boxes(x, active, 0.5 * skin)
+    if cell_size is None:
+        # about one box per cell for most boxes; the few large ones register in several cells
+        ext = np.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])
+        cell_size = max(float(np.percentile(ext, 90)), 1e-12) if len(box) else 1.0
+    max_cells = max(1024.0, max_cells_per_box * len(active))
+    pi, pj = kc.grid_pairs(box, active, bond, float(cell_size), max_cells)
+    return np.column_stack([pi, pj])
+
+
+def brute_force_candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: float) -> np.ndarray:
+    """Reference all-pairs search (O(n^2)) with the same criterion as :func:`candidate_pairs`."""
+    active = np.ascontiguousarray(np.sort(np.asarray(active, dtype=np.int64)))
+    box = kc.triangle_boxes(x, active, 0.5 * skin)
+    pi, pj = kc.brute_force_pairs(box, active, bond)
+    return np.column_stack([pi, pj])
+
+
+def _check_penalty(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value) or value <= 0.0:
+        raise ValueError(f"contact {name} must be a positive finite number [Pa], got {value:g}")
+    return value
+
+
+def _friction_to_mu(friction_angle, n: int, what: str) -> np.ndarray:
+    phi = np.asarray(friction_angle, dtype=np.float64)
+    if phi.ndim == 0:
+        phi = np.full(n, float(phi))
+    if phi.shape != (n,):
+        raise ValueError(f"friction_angle must be a scalar or have one value per {what} ({n}), got shape {phi.shape}")
+    bad = np.flatnonzero(~np.isfinite(phi) | (phi < 0.0) | (phi >= 90.0))
+    if bad.size:
+        raise ValueError(
+            f"friction angle must lie in [0, 90) degrees; {bad.size} {what}(s) out of range, "
+            f"first: {what} {int(bad[0])} has {float(phi[bad[0]]):g} deg")
+    return np.tan(np.radians(phi))
+
+
+def _mu_from(friction_angle, mu, n: int, what: str) -> np.ndarray | None:
+    """Friction coefficients from angles [deg] or from ``mu`` directly (exactly one, or none)."""
+    if friction_angle is not None and mu is not None:
+        raise ValueError("give friction_angle or mu, not both")
+    if friction_angle is not None:
+        return _friction_to_mu(friction_angle, n, what)
+    if mu is None:
+        return None
+    m = np.asarray(mu, dtype=np.float64)
+    if m.ndim == 0:
+        m = np.full(n, float(m))
+    if m.shape != (n,):
+        raise ValueError(f"mu must be a scalar or have one value per {what} ({n}), got shape {m.shape}")
+    bad = np.flatnonzero(~np.isfinite(m) | (m < 0.0))
+    if bad.size:
+        raise ValueError(f"friction coefficient mu = tan(phi) must be finite and >= 0; {what} {int(bad[0])} "
+                         f"has {float(m[bad[0]]):g}")
+    return m.copy()
+
+
+# ----------------------------------------------------------------------------- the force provider
+class ContactSet:
+    """Triangle-triangle contact of an exploded mesh, called by the solver every step.
+
+    Parameters
+    ----------
+    topology : Topology
+        Exploded mesh (:func:`fdem.topology.build_topology`).
+    penalty : float
+        Normal penalty ``p`` [Pa] (``p = alpha E``, ``alpha`` about 10 to 100; verification.md).
+    friction_angle : float or (n_tri,) array
+        Friction angle ``phi`` [deg] in ``[0, 90)``, per triangle; a pair uses
+        ``mu = tan(min(phi_i, phi_j))``. 0 switches friction off (the branch is skipped).
+    tangential_ratio : float
+        Tangential stiffness of a pair as a fraction of its current secant normal stiffness
+        ``k = F_n^2 / (2 E_pair)`` (``= 3 p L (1/h_c + 1/h_t)`` for a flat overlap of length
+        ``L``). Tangential stiffness then grows with the contact like the normal one, and the
+        elastic pre-slip before sliding, ``mu F_n / k_t``, is ``mu / tangential_ratio`` times the
+        normal penetration: it vanishes as the penalty grows. Default 1; values above 1
+        shorten :meth:`stable_dt`.
+    damping_ratio : float
+        Normal viscous damping ratio ``xi >= 0`` of a pair (``c_n = 2 xi sqrt(k m_eff)``, ``k`` the
+        pair's current secant stiffness, ``m_eff`` the reduced mass of its two triangles); needs
+        ``mass``. 0 (default) skips the branch.
+    mass : (n_nodes,) array, optional
+        Lumped nodal masses [kg/m]; required for damping.
+    skin : float, optional
+        Verlet buffer [m]: boxes grow by ``skin/2``; re-search when a node has moved ``skin/2``.
+        Default: 0.3 times the mean edge length.
+    cell_size : float, optional
+        Grid cell [m]; default the 90th percentile of the grown boxes' sizes. Any value gives
+        the same pairs (only the cost changes).
+    x : (n_nodes, 2) array, optional
+        Positions to check for overlap in the reference state (default ``topology.x0``).
+    check_overlap : bool
+        Raise ``ValueError`` if bodies overlap in the reference state (default True).
+
+    The solver calls :meth:`add_forces`, :meth:`energy_terms` and :meth:`stable_dt`; the crack
+    code calls :meth:`activate_cracks` when crack elements break.
+    """
+
+    def __init__(self, topology: Topology, penalty: float, friction_angle=0.0, *,
+                 tangential_ratio: float = 1.0, damping_ratio: float = 0.0,
+                 mass: np.ndarray | None = None, skin: float | None = None,
+                 cell_size: float | None = None, x: np.ndarray | None = None,
+                 check_overlap: bool = True) -> None:
+        self.topology = topology
+        n_tri = topology.n_triangles
+        self.penalty = _check_penalty("penalty", penalty)
+        tangential_ratio = float(tangential_ratio)
+        if not np.isfinite(tangential_ratio) or tangential_ratio <= 0.0:
+            raise ValueError(f"tangential_ratio must be positive and finite, got {tangential_ratio!r}")
+        self.tangential_ratio = tangential_ratio
+        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")
+        damping_ratio = float(damping_ratio)
+        if not np.isfinite(damping_ratio) or damping_ratio < 0.0:
+            raise ValueError(f"damping_ratio must be >= 0, got {damping_ratio!r}")
+        self.damping_ratio = damping_ratio
+        self.mass_tri = None
+        if mass is not None:
+            mass = np.asarray(mass, dtype=np.float64)
+            if mass.shape != (topology.n_nodes,) or np.any(~(mass > 0.0)):
+                raise ValueError(f"mass must be ({topology.n_nodes},) positive nodal masses, got shape {mass.shape}")
+            self.mass_tri = mass.reshape(-1, 3).sum(axis=1)
+        if damping_ratio > 0.0 and self.mass_tri is None:
+            raise ValueError("contact damping_ratio > 0 needs the nodal masses: pass mass=...")
+
+        x0 = topology.x0
+        tri = topology.triangles
+        edges = np.linalg.norm(x0[np.roll(tri, -1, axis=1)] - x0[tri], axis=2)  # (n_tri, 3)
+        self._edge_max = edges.max(axis=1)
+        self._altitude = 2.0 * np.abs(topology.triangle_area0) / self._edge_max
+        if skin is None:
+            skin = 0.3 * float(edges.mean()) if edges.size else 1.0
+        skin = float(skin)
+        if not np.isfinite(skin) or skin <= 0.0:
+            raise ValueError(f"contact skin must be positive, got {skin!r}")
+        self.skin = skin
+        if cell_size is not None and not (np.isfinite(cell_size) and cell_size > 0.0):
+            raise ValueError(f"contact cell_size must be positive, got {cell_size!r}")
+        self.cell_size = cell_size
+
+        self._broken = np.zeros(topology.n_cracks, dtype=bool)
+        self._bond = _bond_table(topology, ~self._broken)
+        self._is_contactor = np.zeros(n_tri, dtype=bool)
+        self._is_contactor[topology.boundary_triangle] = True
+        self._n_bodies = int(np.unique(topology.triangle_body).size)
+        self._refresh_active()
+
+        # pair state
+        self.pairs = np.zeros((0, 2), np.int64)
+        self._keys = np.zeros(0, np.int64)
+        self._history = np.zeros((0, 4))
+        self._mu_pair = np.zeros(0)
+        self._damp_pair = np.zeros(0)
+        self._pair_force = np.zeros((0, kc.N_OUT))
+        self._touching = np.zeros(0, np.uint8)
+        self._inc_ptr = np.zeros(1, np.int64)
+        self._inc_code = np.zeros(0, np.int64)
+        self._x_search = None
+        self._needs_search = True
+        self.n_searches = 0
+
+        # energy ledger [J/m]
+        self._e_normal = 0.0
+        self._e_tangential = 0.0
+        self._w_friction = 0.0
+        self._w_damping = 0.0
+
+        if check_overlap:
+            self.check_reference_overlap(topology.x0 if x is None else np.asarray(x, dtype=np.float64))
+
+    # ------------------------------------------------------------------ state
+    @property
+    def active(self) -> np.ndarray:
+        """(n_act,) sorted ids of the contactor triangles."""
+        return self._active
+
+    @property
+    def n_pairs(self) -> int:
+        """Candidate pairs in the current list."""
+        return len(self.pairs)
+
+    @property
+    def n_touching(self) -> int:
+        """Pairs that overlapped at the last :meth:`add_forces`."""
+        return int(self._touching.sum())
+
+    @property
+    def dormant(self) -> bool:
+        """True while there is nothing that can touch: one body and no broken crack element."""
+        return self._n_bodies <= 1 and not self._broken.any()
+
+    def _refresh_active(self) -> None:
+        self._active = np.flatnonzero(self._is_contactor).astype(np.int64)
+        self._slot = np.full(self.topology.n_triangles, -1, dtype=np.int64)
+        self._slot[self._active] = np.arange(self._active.size)
+
+    def activate_cracks(self, crack_ids: Iterable[int], friction_angle=None, mu=None) -> None:
+        """Hand broken crack elements to contact.
+
+        Triangles A and B of each crack become contactors, and their bond is dropped so that they
+        can push each other (they could not while the crack element was intact). The friction
+        of both triangles is set to the crack's joint property when given, either as
+        ``friction_angle`` [deg] or as ``mu = tan(phi)`` (e.g. ``CrackSet.residual_friction``),
+        a scalar or one value per crack. Triggers a re-search on the next :meth:`add_forces`.
+        """
+        ids = np.atleast_1d(np.asarray(crack_ids, dtype=np.int64))
+        if ids.size == 0:
+            return
+        if ids.min() < 0 or ids.max() >= self.topology.n_cracks:
+            raise ValueError(f"crack ids must lie in [0, {self.topology.n_cracks}), got {ids.min()}..{ids.max()}")
+        tri = self.topology.crack_triangles[ids]
+        coef = _mu_from(friction_angle, mu, ids.size, "crack")
+        if coef is not None:
+            self.mu_tri[tri[:, 0]] = coef
+            self.mu_tri[tri[:, 1]] = coef
+        self._broken[ids] = True
+        cn = self.topology.crack_nodes[ids]
+        self._bond[tri[:, 0], cn[:, 0] % 3] = -1
+        self._bond[tri[:, 1], cn[:, 2] % 3] = -1
+        self._is_contactor[tri.ravel()] = True
+        self._refresh_active()
+        self._needs_search = True
+
+    def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
+        """Change the friction of ``triangles`` (default all), as ``friction_angle`` [deg] or
+        ``mu = tan(phi)``, scalar or one per triangle (strength reduction, new joint properties);
+        the pairs use it from the next step, their slip history is kept."""
+        tris = np.arange(self.topology.n_triangles) if triangles is None else np.asarray(triangles, np.int64)
+        coef = _mu_from(friction_angle, mu, tris.size, "triangle")
+        if coef is None:
+            raise ValueError("set_friction needs friction_angle or mu")
+        self.mu_tri[tris] = coef
+        if len(self.pairs):
+            self._mu_pair = np.minimum(self.mu_tri[self.pairs[:, 0]], self.mu_tri[self.pairs[:, 1]])
+
+    def set_friction_angle(self, friction_angle, triangles: np.ndarray | None = None) -> None:
+        """Shorthand for :meth:`set_friction` with angles [deg]."""
+        self.set_friction(friction_angle=friction_angle, triangles=triangles)
+
+    # ------------------------------------------------------------------ search
+    def search(self, x: np.ndarray) -> None:
+        """Re-run the broad phase at positions ``x``; carry the friction history of surviving pairs."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        pairs = candidate_pairs(x, self._active, self._bond, self.skin, self.cell_size)
+        n_tri = self.topology.n_triangles
+        keys = pairs[:, 0] * n_tri + pairs[:, 1]
+        history = np.empty((len(pairs), 4))
+        kc.carry_history(self._keys, self._history, keys, history)
+        self.pairs, self._keys, self._history = pairs, keys, history
+        self._mu_pair = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
+        if self.damping_ratio > 0.0:
+            mi, mj = self.mass_tri[pairs[:, 0]], self.mass_tri[pairs[:, 1]]
+            self._damp_pair = 2.0 * self.damping_ratio * np.sqrt(mi * mj / (mi + mj))
+        else:
+            self._damp_pair = np.zeros(len(pairs))
+        self._pair_force = np.zeros((len(pairs), kc.N_OUT))
+        self._touching = np.zeros(len(pairs), np.uint8)
+        self._inc_ptr, self._inc_code = kc.pair_incidence(pairs[:, 0].copy(), pairs[:, 1].copy(),
+                                                          self._slot, self._active.size)
+        self._x_search = x.copy()
+        self._needs_search = False
+        self.n_searches += 1
+
+    def _maybe_search(self, x: np.ndarray) -> None:
+        if self._needs_search or self._x_search is None:
+            self.search(x)
+        elif kc.max_displacement(x, self._x_search, self._active) > 0.5 * self.skin:
+            self.search(x)
+
+    # ------------------------------------------------------------------ the solver's interface
+    def add_forces(self, x: np.ndarray, v: np.ndarray, f: np.ndarray, dt: float, step: int) -> None:
+        """Add contact forces on the nodes into ``f`` (n_nodes, 2) [N/m].
+
+        ``x`` positions [m] and ``v`` velocities [m/s] of the exploded nodes (the velocity used
+        for slip and damping increments ``v dt``), ``dt`` [s], ``step`` the step number (unused
+        by the physics; kept for the interface). Updates the energy ledger.
+        """
+        if self.dormant:
+            return
+        if v is None:  # no velocities: no slip or damping increments this step
+            v = np.zeros_like(x)
+        self._maybe_search(x)
+        if len(self.pairs) == 0:
+            self._e_normal = 0.0
+            self._e_tangential = 0.0
+            return
+        e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self.pairs[:, 0], self.pairs[:, 1], self.penalty,
+                                            self._mu_pair, self.tangential_ratio, self._damp_pair, float(dt),
+                                            self._history, self._pair_force, self._touching)
+        kc.gather_forces(f, self._active, self._inc_ptr, self._inc_code, self._pair_force, self._touching)
+        self._e_normal = e_n
+        self._e_tangential = e_t
+        self._w_friction += w_f
+        self._w_damping += w_d
+
+    def energy_terms(self) -> dict[str, float]:
+        """Energy ledger [J/m] after the last :meth:`add_forces`.
+
+        ``contact_elastic``: stored normal penalty energy plus tangential spring energy (now);
+        ``friction``: frictional work dissipated so far; ``contact_damping``: viscous work
+        dissipated so far.
+        """
+        return {
+            "contact_elastic": float(self._e_normal + self._e_tangential),
+            "friction": float(self._w_friction),
+            "contact_damping": float(self._w_damping),
+        }
+
+    def stable_dt(self, mass: np.ndarray) -> float:
+        """Critical central-difference step of the contact springs [s]: ``2 / omega_max``.
+
+        For a triangle with longest edge ``L``, altitude ``h`` on it and smallest nodal mass
+        ``m``, a face-to-face contact against an equal triangle has normal stiffness
+        ``k_n = 3 p L (2 / h)``, shared by two nodes on each side; the relative mode gives
+        ``omega^2 = k_n / m = 6 p L / (h m)``. The tangential spring (``tangential_ratio * k_n``
+        acting at the overlap centroid, half on each of those nodes) gives
+        ``tangential_ratio`` times that, so ``omega^2 = 6 p L / (h m) * max(1, tangential_ratio)``.
+        For a regular mesh (``m = rho L h / 6``) this is ``dt = (h / 3) sqrt(rho / p)``: the
+        ``h sqrt(rho/p)`` of verification.md with the constant worked out. Taken over every
+        triangle (any may become a contactor), so it does not change as cracks break. The
+        solver applies its own safety factor.
+        """
+        mass = np.asarray(mass, dtype=np.float64)
+        if mass.shape != (self.topology.n_nodes,):
+            raise ValueError(f"mass must have shape ({self.topology.n_nodes},), got {mass.shape}")
+        m = mass.reshape(-1, 3).min(axis=1)
+        if np.any(~(m > 0.0)):
+            t = int(np.flatnonzero(~(m > 0.0))[0])
+            raise ValueError(f"triangle {t} has a non-positive nodal mass {m[t]!r}")
+        omega2 = 6.0 * self.penalty * self._edge_max / self._altitude * max(1.0, self.tangential_ratio) / m
+        return float(2.0 / np.sqrt(omega2.max()))
+
+    # ------------------------------------------------------------------ checks
+    def check_reference_overlap(self, x: np.ndarray, rel_tol: float = 1e-8) -> None:
+        """Raise ``ValueError`` if any two contactor triangles overlap at positions ``x``
+        (area above ``rel_tol`` times the smaller triangle), naming bodies, triangles and place."""
+        if len(self._active) < 2:
+            return
+        pairs = candidate_pairs(x, self._active, self._bond, 0.0, self.cell_size)
+        if len(pairs) == 0:
+            return
+        n = len(pairs)
+        out = np.zeros((n, kc.N_OUT))
+        kc.pair_forces(np.ascontiguousarray(x, dtype=np.float64), np.zeros_like(x, dtype=np.float64),
+                       pairs[:, 0].copy(), pairs[:, 1].copy(), 1.0, np.zeros(n), 1.0, np.zeros(n), 0.0,
+                       np.zeros((n, 4)), out, np.zeros(n, np.uint8))
+        area = np.abs(triangle_areas(x, self.topology.triangles))
+        overlap = out[:, 12]
+        bad = np.flatnonzero(overlap > rel_tol * np.minimum(area[pairs[:, 0]], area[pairs[:, 1]]))
+        if bad.size:
+            i, j = (int(t) for t in pairs[bad[0]])
+            a = overlap[bad[0]]
+            body = self.topology.triangle_body
+            xi = x[3 * i:3 * i + 3].mean(axis=0)
+            xj = x[3 * j:3 * j + 3].mean(axis=0)
+            raise ValueError(
+                f"bodies {body[i]} and {body[j]} overlap in the reference state: triangle {i} "
+                f"(body {body[i]}, centroid ({xi[0]:.6g}, {xi[1]:.6g})) and triangle {j} "
+                f"(body {body[j]}, centroid ({xj[0]:.6g}, {xj[1]:.6g})) share {a:.3g} m^2; "
+                f"move the bodies apart or mesh them as one ({bad.size} overlapping pair(s) in all)")
