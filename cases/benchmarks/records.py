@@ -45,3 +45,24 @@ def save(name: str, records: list[dict], **meta) -> Path:
         print(f"{r['what']}:{size}{thr} -> {r['value']:.6g} {r['unit']}")
     print(f"wrote {path}")
     return path
+
+
+def best_rate(step, items_per_call: int, seconds: float = 1.0, repeats: int = 5) -> float:
+    """Items per second of ``step()``: best of ``repeats`` timings of as many calls as fit in ``seconds``.
+
+    The first call is a warm-up (Numba compilation, first-touch of memory) and is not timed.
+    """
+    import time
+
+    step()
+    t0 = time.perf_counter()
+    step()
+    per_call = max(time.perf_counter() - t0, 1e-7)
+    n_calls = max(3, int(seconds / per_call))
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(n_calls):
+            step()
+        best = min(best, (time.perf_counter() - t0) / n_calls)
+    return items_per_call / best
