@@ -49,7 +49,7 @@ import numpy as np
 
 from .kernels.integration import (LEDGER_FIELDS, n_blocks, node_pass, step_exploded, step_exploded_elastic,
                                   triangle_pass, viscous_power)
-from .kernels.triangles import triangle_stress_state
+from .kernels.triangles import assemble_triangle_forces, triangle_stress_state
 from .materials import PLANE_STRAIN, combine_stable_dt
 from .model import Model
 from . import output as out
@@ -544,6 +544,38 @@ class Simulation:
         return {"xx": s[:, 0], "yy": s[:, 1], "xy": s[:, 2], "zz": np.array(szz), "principal_1": s1,
                 "principal_2": s2, "von_mises": out.von_mises(s[:, 0], s[:, 1], s[:, 2], szz),
                 "J": s[:, 4], "energy_density": s[:, 5]}
+
+    def reaction_force(self, nodes: np.ndarray) -> np.ndarray:
+        """Total force (2,) [N/m] that supports or prescribed velocities exert on ``nodes``.
+
+        For a node held at zero acceleration the support supplies ``R = -(f_triangle +
+        f_interaction + f_ext + m g)``; triangle forces are evaluated at the current positions,
+        interaction forces are those of the last step. The platen load of a test is minus the
+        reaction summed over the platen's nodes.
+        """
+        nodes = np.asarray(nodes, dtype=np.int64)
+        st = self.state
+        if self.exploded:
+            tris = np.unique(nodes // 3)
+            corner = np.zeros((3 * len(tris), 2))
+            sub_tc = np.ascontiguousarray(self.tc[tris])
+            sub_tri = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
+            assemble_triangle_forces(st.x[self.triangles[tris]].reshape(-1, 2),
+                                     st.v[self.triangles[tris]].reshape(-1, 2), sub_tri, sub_tc, corner)
+            pos = np.searchsorted(self.triangles[tris].ravel(), nodes)
+            f_tri = corner[pos]
+        else:
+            corner = np.zeros((3 * self.model.n_triangles, 2))
+            assemble_triangle_forces(st.x, st.v, self.triangles, self.tc, corner)
+            f_all = np.zeros_like(st.x)
+            np.add.at(f_all, self.triangles.ravel(), corner)
+            f_tri = f_all[nodes]
+        f = f_tri + st.mass[nodes, None] * self.gravity
+        if self.providers:
+            f = f + self.f_interaction[nodes]
+        if self.use_external:
+            f = f + self.f_external[nodes]
+        return -f.sum(axis=0)
 
     def fields(self, state: State | None = None) -> dict[str, dict[str, np.ndarray]]:
         """Point and cell arrays written to the VTU files."""

@@ -24,7 +24,7 @@ from fdem.topology import build_topology  # noqa: E402
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--size", type=float, default=0.18)
-    parser.add_argument("--algorithm", default="frontal-delaunay")
+    parser.add_argument("--algorithm", default="delaunay")
     args = parser.parse_args(argv)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
