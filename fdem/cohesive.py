@@ -334,6 +334,7 @@ class CrackSet:
         self._state = np.zeros((n, K.N_STATE))
         self._diss = np.zeros((n, 3))
         self.broken = np.zeros(n, dtype=bool)
+        self.failure_mode = np.zeros(n, dtype=np.int8)  # 0 intact, 1 mode I, 2 mode II, 3 mixed
         self._broke_flag = np.zeros(n, dtype=np.int8)
         self.released = 0.0
         self.newly_broken = np.zeros(0, dtype=np.int64)
@@ -509,6 +510,7 @@ class CrackSet:
             xi2 = self._state[ids, 3 * e + 1] * self._const[ids, 6]
             share += 0.5 * np.minimum((xi2 / D) ** 2, 1.0)
         mode = np.where(share < MODE_SHARE, "I", np.where(share > 1 - MODE_SHARE, "II", "mixed"))
+        self.failure_mode[topo_ids] = np.where(share < MODE_SHARE, 1, np.where(share > 1 - MODE_SHARE, 2, 3))
         for k in np.argsort(topo_ids):
             c = int(topo_ids[k])
             self._events.append((c, int(step), self._time, mid[k, 0], mid[k, 1], mode[k],
@@ -541,11 +543,13 @@ class CrackSet:
 
     def crack_fields(self) -> dict[str, np.ndarray]:
         """(n,) arrays for the crack line cells of the output: ``damage``, ``broken`` (0/1),
-        ``fracture_energy`` (mode I + II dissipated per element [J/m]), ``strength_multiplier``."""
+        ``failure_mode`` (0 intact, 1 mode I, 2 mode II, 3 mixed), ``fracture_energy`` (mode I +
+        II dissipated per element [J/m]), ``strength_multiplier``."""
         d = self.dissipated
         return {
             "damage": self.damage,
             "broken": self.broken.astype(np.int8),
+            "failure_mode": self.failure_mode,
             "fracture_energy": d[:, 0] + d[:, 1],
             "strength_multiplier": self.strength_multiplier,
         }

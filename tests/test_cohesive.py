@@ -182,6 +182,7 @@ def test_mode_II_peak_and_fracture_energy(sigma_n, softening):
     e = dr.cs.energy_terms()
     assert e["crack_friction"] == pytest.approx(friction, rel=1e-2, abs=1e-9)
     assert dr.cs.events["mode"][0] == "II"
+    assert dr.cs.crack_fields()["failure_mode"][dr.cs.events["element"][0]] == 2
     assert dr.cs.events["energy_II"][0] == pytest.approx(p.G_II * L, rel=1e-2)
 
 
