@@ -71,6 +71,10 @@ def softening_max_slope(kind: str = "munjiza") -> float:
     return _ZCONST[k][1]
 
 
+ELASTIC_ONLY_LIMIT = 1e100
+"""Peak opening [m] and cohesion [N/m] written into the constants while elements are held elastic."""
+
+
 @dataclass(frozen=True)
 class CrackProperties:
     """Parameters of one crack-element property set (intact rock bridges, or one DFN joint set).
@@ -395,6 +399,8 @@ class CrackSet:
                     f"softening branch would snap back; smallest admissible G_II is {need_II[i]:.6g} J/m^2 "
                     f"(raise G_II or the tangential penalty)")
 
+    _elastic_only = False
+
     def _fill_constants(self) -> None:
         ft, c, tanphi, GI, GII, kind = self._element_strengths(self._strength_factor)
         w = 0.5 * self.length0
@@ -411,7 +417,22 @@ class CrackSet:
         C[:, 5] = 1.0 / dO
         C[:, 6] = inv_dK
         C[:, 7] = kind
+        if self._elastic_only:
+            # Peak opening and cohesion out of reach: every update takes the elastic fast path.
+            C[:, 2] = ELASTIC_ONLY_LIMIT
+            C[:, 3] = ELASTIC_ONLY_LIMIT
         self._const[:] = C[self._perm]
+
+    def hold_elastic(self, on: bool = True) -> None:
+        """Keep every element elastic (no damage, no breakage, no shear yield) while ``on``.
+
+        For geostatic initialisation: gravity is switched on and damped to equilibrium with the
+        crack elements acting as elastic penalties, as in the paper's initial FEM stage; then
+        ``hold_elastic(False)`` restores the strengths (times the current strength factor).
+        Damage already done is kept.
+        """
+        self._elastic_only = bool(on)
+        self._fill_constants()
 
     def scale_strength(self, factor: float) -> None:
         """Set ``f_t``, ``c`` and ``tan(phi)`` (and the residual friction) to ``factor`` times

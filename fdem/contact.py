@@ -180,17 +180,21 @@ class ContactSet:
         Positions to check for overlap in the reference state (default ``topology.x0``).
     check_overlap : bool
         Raise ``ValueError`` if bodies overlap in the reference state (default True).
+    cracks : CrackSet, optional
+        The crack elements of the same topology. Elements it breaks (``cracks.newly_broken``)
+        are handed to contact at the start of the next :meth:`add_forces`, with their residual
+        friction ``cracks.residual_friction``; register the crack set before the contact set.
 
-    The solver calls :meth:`add_forces`, :meth:`energy_terms` and :meth:`stable_dt`; the crack
-    code calls :meth:`activate_cracks` when crack elements break.
+    The solver calls :meth:`add_forces`, :meth:`energy_terms` and :meth:`stable_dt`.
     """
 
     def __init__(self, topology: Topology, penalty: float, friction_angle=0.0, *,
                  tangential_ratio: float = 1.0, damping_ratio: float = 0.0,
                  mass: np.ndarray | None = None, skin: float | None = None,
                  cell_size: float | None = None, x: np.ndarray | None = None,
-                 check_overlap: bool = True) -> None:
+                 check_overlap: bool = True, cracks=None) -> None:
         self.topology = topology
+        self.cracks = cracks
         n_tri = topology.n_triangles
         self.penalty = _check_penalty("penalty", penalty)
         tangential_ratio = float(tangential_ratio)
@@ -255,6 +259,12 @@ class ContactSet:
 
         if check_overlap:
             self.check_reference_overlap(topology.x0 if x is None else np.asarray(x, dtype=np.float64))
+        if cracks is not None:
+            if cracks.topology is not topology:
+                raise ValueError("contact and crack elements must share one topology")
+            already = np.flatnonzero(cracks.broken)
+            if already.size:
+                self.activate_cracks(already, mu=cracks.residual_friction[already])
 
     # ------------------------------------------------------------------ state
     @property
@@ -363,6 +373,11 @@ class ContactSet:
         for slip and damping increments ``v dt``), ``dt`` [s], ``step`` the step number (unused
         by the physics; kept for the interface). Updates the energy ledger.
         """
+        if self.cracks is not None:
+            # Faces of crack elements broken by this step's crack pass become contact faces.
+            ids = self.cracks.newly_broken
+            if ids.size:
+                self.activate_cracks(ids, mu=self.cracks.residual_friction[ids])
         if self.dormant:
             return
         if v is None:  # no velocities: no slip or damping increments this step

@@ -480,3 +480,30 @@ def test_benchmark_script_runs(tmp_path: Path):
     out = tmp_path / "cracks.json"
     recs = mod.main(["--sizes", "2000", "--threads", "1", "--repeats", "1", "--out", str(out)])
     assert out.exists() and len(recs) == 2 and all(r["value"] > 0 for r in recs)
+
+
+def test_held_elastic_elements_neither_damage_nor_break():
+    from fdem.mesh import structured_rectangle
+    from fdem.topology import build_topology
+
+    topo = build_topology(structured_rectangle(1, 1, 1.0, 1.0, diagonal="right"))
+    p = CrackProperties(f_t=1e6, c=2e6, phi=30, G_I=100.0, G_II=1000.0, p_n=1e10)
+    cs = CrackSet(topo, {0: p})
+    cn = topo.crack_nodes[0]
+    t = topo.x0[cn[1]] - topo.x0[cn[0]]
+    t /= np.linalg.norm(t)
+    n = np.array([t[1], -t[0]])
+    kn = p.p_n / topo.crack_length0[0]
+    opening = 3 * p.f_t / kn  # three times the peak opening
+    x = topo.x0.copy()
+    x[topo.triangles[topo.crack_triangles[0, 1]]] += opening * n
+    cs.hold_elastic()
+    f = np.zeros_like(x)
+    cs.add_forces(x, np.zeros_like(x), f, 1e-7, 0)
+    # Traction k_n o on the element's length: the elastic penalty, three times f_t.
+    pull = -(f[topo.triangles[topo.crack_triangles[0, 1]]] @ n).sum()
+    assert pull == pytest.approx(kn * opening * topo.crack_length0[0], rel=1e-12)
+    assert cs.damage.max() == 0.0 and not cs.broken.any()
+    cs.hold_elastic(False)
+    cs.add_forces(x, np.zeros_like(x), np.zeros_like(x), 1e-7, 1)
+    assert cs.damage.max() > 0.0
