@@ -67,7 +67,7 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True) 
     model.roller("right", "x")
     model.set_initial_stress(geostatic_stress(DENSITY, GRAVITY, surface=ground_surface(geometry.bodies[0]),
                                               poisson=POISSON))
-    cracks = CrackSet(topology, four_slope_property_sets())
+    cracks = CrackSet(topology, four_slope_property_sets(), contact_penalty=CONTACT_PENALTY)
     contact = ContactSet(topology, CONTACT_PENALTY, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
     sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="slope", pictures=pictures)
     return sim, cracks

@@ -260,6 +260,13 @@ class CrackSet:
         the faster on this hardware (see ``docs/benchmarks/cracks.json``).
     parallel_min : below this many live elements a serial loop runs instead (no threading
         overhead on small problems).
+    contact_penalty : the contact penalty ``p`` [Pa] of the scene, if the crack elements' faces
+        will be handed to contact. Compression across an element is then resisted with the
+        stiffness contact would have for a flat penetration of its two triangles,
+        ``k_c = 3 p (1/h_A + 1/h_B)`` per unit area (``h`` the altitudes on the edge), so a
+        compressed element that breaks hands over the same force and energy instead of a jump
+        (with ``k_c = k_n`` contact typically pushes several times harder and creates energy).
+        Default: ``k_c = k_n``.
 
     State exposed for output (topology order): ``damage`` (n,) in [0, 1], ``damage_ip`` (n, 2),
     ``broken`` (n,) bool, ``dissipated`` (n, 3), ``crack_fields()``, ``events`` (structured
@@ -270,7 +277,7 @@ class CrackSet:
 
     def __init__(self, topology: Topology, property_sets: Mapping[int, CrackProperties] | Sequence[CrackProperties],
                  heterogeneity: Heterogeneity | None = None, scheme: str = "colour",
-                 parallel_min: int = K.PARALLEL_MIN) -> None:
+                 parallel_min: int = K.PARALLEL_MIN, contact_penalty: float | None = None) -> None:
         if scheme not in ("colour", "gather"):
             raise ValueError(f"scheme must be 'colour' or 'gather', got {scheme!r}")
         self.topology = topology
@@ -315,6 +322,16 @@ class CrackSet:
         for t in present:
             sel = tag == t
             self.kn[sel], self.kt[sel] = self.property_sets[int(t)].stiffness(self.length0[sel])
+        self.kc = self.kn.copy()
+        if contact_penalty is not None:
+            if not (math.isfinite(contact_penalty) and contact_penalty > 0):
+                raise ValueError(f"contact_penalty must be positive and finite, got {contact_penalty}")
+            # Flat penetration d of triangle B into A under distributed-potential contact stores
+            # p L (3 d^2 / 2)(1/h_A + 1/h_B) (h: altitudes on the shared edge), a stiffness per
+            # unit area k_c = 3 p (1/h_A + 1/h_B): the same resistance before and after breakage.
+            area = topology.triangle_area0
+            h = 2.0 * area[topology.crack_triangles] / self.length0[:, None]
+            self.kc = 3.0 * contact_penalty * (1.0 / h[:, 0] + 1.0 / h[:, 1])
         self._check_snap_back(1.0)
 
         # Internal element order: colour-major for the colour scheme, so that every colour
@@ -417,6 +434,7 @@ class CrackSet:
         C[:, 5] = 1.0 / dO
         C[:, 6] = inv_dK
         C[:, 7] = kind
+        C[:, 8] = self.kc * w
         if self._elastic_only:
             # Peak opening and cohesion out of reach: every update takes the elastic fast path.
             C[:, 2] = ELASTIC_ONLY_LIMIT
@@ -546,6 +564,16 @@ class CrackSet:
         if self._events_arr is None:
             self._events_arr = np.array(self._events, dtype=EVENT_DTYPE)
         return self._events_arr
+
+    def n_inelastic(self) -> int:
+        """Number of elements that have left the elastic range (damaged or slid) so far."""
+        return int(np.count_nonzero(self._status))
+
+    def inelastic(self) -> np.ndarray:
+        """Sorted topology ids of the elements that have left the elastic range (damaged, slid
+        or broken). Contact watches these: once an element softens or slides, its triangles'
+        vertex neighbours can interpenetrate, which only contact resists."""
+        return np.sort(self._perm[np.flatnonzero(self._status)])
 
     @property
     def damage(self) -> np.ndarray:

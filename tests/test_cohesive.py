@@ -507,3 +507,34 @@ def test_held_elastic_elements_neither_damage_nor_break():
     cs.hold_elastic(False)
     cs.add_forces(x, np.zeros_like(x), np.zeros_like(x), 1e-7, 1)
     assert cs.damage.max() > 0.0
+
+
+def test_compression_matched_to_contact_hands_over_the_same_force():
+    """With ``contact_penalty`` set, a compressed element pushes back as contact would after it
+    breaks: same normal force for the same flat penetration (no jump at breakage)."""
+    from fdem.contact import pair_energy_force
+    from fdem.mesh import structured_rectangle
+    from fdem.topology import build_topology
+
+    topo = build_topology(structured_rectangle(1, 1, 1.0, 1.0, diagonal="right"))
+    p_contact = 5e9
+    props = {0: CrackProperties(f_t=1e6, c=2e6, phi=30, G_I=100.0, G_II=1000.0, p_n=1e10)}
+    cs = CrackSet(topo, props, contact_penalty=p_contact)
+    cn = topo.crack_nodes[0]
+    t = topo.x0[cn[1]] - topo.x0[cn[0]]
+    t /= np.linalg.norm(t)
+    n = np.array([t[1], -t[0]])
+    depth = 1e-5  # B pushed into A, << element size
+    x = topo.x0.copy()
+    a, b = topo.triangles[topo.crack_triangles[0]]
+    x[b] -= depth * n
+    f = np.zeros_like(x)
+    cs.add_forces(x, np.zeros_like(x), f, 1e-7, 0)
+    crack_push_on_b = f[b].sum(axis=0) @ n
+    _, f_a, f_b, _ = pair_energy_force(x[a], x[b], p_contact)
+    contact_push_on_b = f_b.sum(axis=0) @ n
+    assert crack_push_on_b > 0 and contact_push_on_b > 0
+    assert crack_push_on_b == pytest.approx(contact_push_on_b, rel=0.01)
+    # Stored energy agrees as well: 0.5 k_c d^2 L against the pair's potential energy.
+    e_contact, _, _, _ = pair_energy_force(x[a], x[b], p_contact)
+    assert cs.energy_terms()["crack_elastic"] == pytest.approx(e_contact, rel=0.01)

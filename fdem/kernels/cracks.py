@@ -7,8 +7,8 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``nodes : (n, 4) int32``
     ``[A_p, A_q, B_q, B_p]`` (see :mod:`fdem.topology`). End 0 of the element is the node pair
     (0, 3), end 1 the pair (1, 2); the integration points are these two ends.
-``const : (n, 8) float64``
-    Per-element constants, one 64-byte row, already multiplied by the end weight ``w = L0/2``
+``const : (n, 9) float64``
+    Per-element constants, already multiplied by the end weight ``w = L0/2``
     where marked ``*w``:
 
     ====  ===========  ===============================================================
@@ -22,6 +22,8 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
     5     ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage [1/m]
     6     ``inv_dK``   ``1/kappa_r``, inverse plastic slip to full damage [1/m] (0: no cohesion)
     7     ``kind``     softening shape: 0 Munjiza (Evans-Marathe), 1 linear
+    8     ``Kc``       normal stiffness in compression, ``k_c w`` [N/m]       (``*w``);
+                       ``Kn`` unless matched to contact (see ``CrackSet``)
     ====  ===========  ===============================================================
 
     A strength reduction or heterogeneity changes the numbers in these rows, never the code.
@@ -54,7 +56,7 @@ EM_C = 6.0
 MUNJIZA = 0
 LINEAR = 1
 
-N_CONST = 8
+N_CONST = 9
 N_STATE = 6
 PARALLEL_MIN = 4096
 """Below this many live elements the serial loop is used (a parallel region costs more)."""
@@ -84,11 +86,11 @@ def softening(D, kind):
 
 
 @njit(cache=True, fastmath=True)
-def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
+def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
     """Cohesive law at one integration point: tractions and the updated state.
 
     Inputs are the opening ``o`` (>0 opens) and slip ``s`` [m] at the point, the state
-    ``D, kap, sp`` and the constants: penalties ``Kn, Kt``, peak opening ``op = Ft/Kn``,
+    ``D, kap, sp`` and the constants: penalties ``Kn, Kt`` (``Kc`` in compression), peak opening ``op = Ft/Kn``,
     cohesion ``C``, ``tanphi``, ``inv_dO = 1/(o_r - o_p)``, ``inv_dK = 1/kappa_r``, softening
     ``kind``. Stiffnesses, strengths and energies are per unit area, or all multiplied by the
     point weight ``w`` (the law is homogeneous in that scaling).
@@ -98,7 +100,7 @@ def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
         xi_I = max(o - o_p, 0) / (o_r - o_p)       normalised post-peak opening
         xi_II = kap / kappa_r                       normalised cohesive plastic slip
         D'   = max(D, sqrt(xi_I^2 + xi_II^2))       elliptical mixed mode, never heals
-        normal:  sigma = Kn o                       (o <= 0, full penalty in compression)
+        normal:  sigma = Kc o                       (o <= 0, full penalty in compression)
                  sigma = z(D') Ft o / (o_p + D' (o_r - o_p))   (o > 0: secant, damaged stiffness)
         shear:   tau_tr = Kt (s - sp)
                  F = z(D') C + max(-sigma, 0) tanphi          Mohr-Coulomb, tension cut-off
@@ -116,17 +118,17 @@ def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
     slip-resisting positive) and the energy dissipated in this update by normal damage, by the
     cohesive part and by friction [J/m^2, or J when the constants carry ``w``].
     """
-    sig_e = Kn * o
+    sig_e = Kn * max(o, 0.0) + Kc * min(o, 0.0)
     ttr = Kt * (s - sp)
     # Fast path, taken by nearly every element: intact, below the tensile peak, elastic shear.
     if D == 0.0 and kap == 0.0 and o <= op:
         if abs(ttr) <= C + max(-sig_e, 0.0) * tanphi:
             return sig_e, ttr, 0.0, 0.0, sp, 0.0, 0.0, 0.0
-    return _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+    return _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
 
 
 @njit(cache=True, fastmath=True)
-def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind):
+def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
     """Damaging / sliding branch of :func:`point_law` (same law, general case)."""
     Ft = Kn * op
     dO = 1.0 / inv_dO
@@ -144,7 +146,7 @@ def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_d
     else:
         z = 1.0
         sec = Kn
-    sig = sec * opos + Kn * oneg
+    sig = sec * opos + Kc * oneg
     dWI = 0.0
     if Dn > D:
         sec_old = Kn
@@ -212,12 +214,13 @@ def element_update(c, x, nodes, const, status, state, diss):
     op = const[c, 2]
     C = const[c, 3]
     tanphi = const[c, 4]
+    Kc = const[c, 8]
     # Fast path of point_law for both ends at once (nearly every element, every step): an
     # element that never left the elastic range (status 0: D = kappa = s_pl = 0) and stays
     # below the tensile peak and inside the Mohr-Coulomb envelope. Reads no state, stores nothing.
-    sig0 = Kn * o0
+    sig0 = Kn * max(o0, 0.0) + Kc * min(o0, 0.0)
     tau0 = Kt * s0
-    sig1 = Kn * o1
+    sig1 = Kn * max(o1, 0.0) + Kc * min(o1, 0.0)
     tau1 = Kt * s1
     elastic = ((status[c] == 0) & (o0 <= op) & (o1 <= op)
                & (abs(tau0) <= C + max(-sig0, 0.0) * tanphi) & (abs(tau1) <= C + max(-sig1, 0.0) * tanphi))
@@ -228,9 +231,9 @@ def element_update(c, x, nodes, const, status, state, diss):
         inv_dK = const[c, 6]
         kind = int(const[c, 7])
         sig0, tau0, Dn0, kn0, sn0, wI0, wII0, wf0 = point_law(
-            o0, s0, state[c, 0], state[c, 1], state[c, 2], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+            o0, s0, state[c, 0], state[c, 1], state[c, 2], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
         sig1, tau1, Dn1, kn1, sn1, wI1, wII1, wf1 = point_law(
-            o1, s1, state[c, 3], state[c, 4], state[c, 5], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind)
+            o1, s1, state[c, 3], state[c, 4], state[c, 5], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
         state[c, 0] = Dn0
         state[c, 1] = kn0
         state[c, 2] = sn0
@@ -377,7 +380,7 @@ def colour_elements(crack_triangles, n_tri):
 @njit(cache=True, fastmath=True)
 def crack_elastic_energy(x, nodes, const, state, active):
     """Elastic energy stored in the live elements [J/m]: per end
-    ``sec o+^2/2 + Kn o-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)``."""
+    ``sec o+^2/2 + Kc o-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)``."""
     e = 0.0
     for j in range(active.shape[0]):
         c = active[j]
@@ -412,19 +415,19 @@ def crack_elastic_energy(x, nodes, const, state, active):
             op_ = max(o, 0.0)
             on_ = min(o, 0.0)
             tau = Kt * (s - state[c, 3 * end + 2])
-            e += 0.5 * sec * op_ * op_ + 0.5 * Kn * on_ * on_ + 0.5 * tau * tau / Kt
+            e += 0.5 * sec * op_ * op_ + 0.5 * const[c, 8] * on_ * on_ + 0.5 * tau * tau / Kt
     return e
 
 
 @njit(cache=True)
 def stable_dt_kernel(mass, nodes, const, active, n_nodes):
     """Critical step of the crack springs: ``dt = min 2 / sqrt(K_a/m_a + K_b/m_b)`` over the
-    node pairs of live elements, where ``K_node`` sums ``max(Kn, Kt)`` of the (<= 2) elements
+    node pairs of live elements, where ``K_node`` sums ``max(Kn, Kt, Kc)`` of the (<= 2) elements
     on the node (a Gershgorin bound on the highest frequency of the crack springs alone)."""
     K = np.zeros(n_nodes)
     for j in range(active.shape[0]):
         c = active[j]
-        k = max(const[c, 0], const[c, 1])
+        k = max(const[c, 0], const[c, 1], const[c, 8])
         for q in range(4):
             K[nodes[c, q]] += k
     dt = np.inf
