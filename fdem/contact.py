@@ -61,13 +61,14 @@ def pair_energy_force(xc: np.ndarray, xt: np.ndarray, penalty: float) -> tuple[f
     ``xc``, ``xt``: (3, 2) corners of the two triangles, counter-clockwise [m]; ``penalty`` [Pa].
     Returns ``(E [J/m], f_c (3, 2), f_t (3, 2) [N/m], overlap area [m^2])``.
     """
-    xc = np.asarray(xc, dtype=np.float64)
-    xt = np.asarray(xt, dtype=np.float64)
-    origin = xc.mean(axis=0)
-    pts = np.concatenate([(xc - origin).ravel(), (xt - origin).ravel()])
-    out = np.zeros((1, kc.N_OUT))
-    e = kc.pair_normal(pts, float(penalty), out, 0, np.empty(kc.N_SCRATCH), np.empty((2, kc.MAX_POLY, kc.N_COL)))
-    return float(e), out[0, 0:6].reshape(3, 2).copy(), out[0, 6:12].reshape(3, 2).copy(), float(out[0, 12])
+    x = np.ascontiguousarray(np.vstack([np.asarray(xc, dtype=np.float64), np.asarray(xt, dtype=np.float64)]))
+    w = np.zeros(kc.N_WORK)
+    res = kc.pair_normal(x, 0, 1, float(penalty), w, np.empty(kc.N_IWORK, np.int64),
+                         np.empty((kc.MAX_VERT, kc.N_COL)))
+    e, area = float(res[0]), float(res[1])
+    if not area > 0.0:
+        return 0.0, np.zeros((3, 2)), np.zeros((3, 2)), 0.0
+    return e, w[0:6].reshape(3, 2).copy(), w[6:12].reshape(3, 2).copy(), area
 
 
 def _bond_table(topology: Topology, intact: np.ndarray) -> np.ndarray:
@@ -231,6 +232,7 @@ class ContactSet:
         self.cell_size = cell_size
 
         self._broken = np.zeros(topology.n_cracks, dtype=bool)
+        self._any_broken = False
         self._bond = _bond_table(topology, ~self._broken)
         self._is_contactor = np.zeros(n_tri, dtype=bool)
         self._is_contactor[topology.boundary_triangle] = True
@@ -243,10 +245,13 @@ class ContactSet:
         self._history = np.zeros((0, 4))
         self._mu_pair = np.zeros(0)
         self._damp_pair = np.zeros(0)
-        self._pair_force = np.zeros((0, kc.N_OUT))
+        self._pair_i = np.zeros(0, np.int64)       # contiguous copies of the pair columns
+        self._pair_j = np.zeros(0, np.int64)
+        self._bounds = np.zeros(2, np.int64)        # chunks of the pair loop
+        self._f_target = np.zeros((0, 6))           # target-side forces, stored per pair
         self._touching = np.zeros(0, np.uint8)
-        self._inc_ptr = np.zeros(1, np.int64)
-        self._inc_code = np.zeros(0, np.int64)
+        self._inc_ptr = np.zeros(1, np.int64)       # pairs by target triangle
+        self._inc_pair = np.zeros(0, np.int64)
         self._x_search = None
         self._needs_search = True
         self.n_searches = 0
@@ -285,7 +290,7 @@ class ContactSet:
     @property
     def dormant(self) -> bool:
         """True while there is nothing that can touch: one body and no broken crack element."""
-        return self._n_bodies <= 1 and not self._broken.any()
+        return self._n_bodies <= 1 and not self._any_broken
 
     def _refresh_active(self) -> None:
         self._active = np.flatnonzero(self._is_contactor).astype(np.int64)
@@ -312,6 +317,7 @@ class ContactSet:
             self.mu_tri[tri[:, 0]] = coef
             self.mu_tri[tri[:, 1]] = coef
         self._broken[ids] = True
+        self._any_broken = True
         cn = self.topology.crack_nodes[ids]
         self._bond[tri[:, 0], cn[:, 0] % 3] = -1
         self._bond[tri[:, 1], cn[:, 2] % 3] = -1
@@ -343,7 +349,10 @@ class ContactSet:
         n_tri = self.topology.n_triangles
         keys = pairs[:, 0] * n_tri + pairs[:, 1]
         history = np.empty((len(pairs), 4))
-        kc.carry_history(self._keys, self._history, keys, history)
+        # touching = 1 where a carried pair has history (the pair loop zeroes it if the pair has
+        # separated; it reads no history of pairs that stay apart)
+        touching = np.empty(len(pairs), np.uint8)
+        kc.carry_history(self._keys, self._history, keys, history, touching)
         self.pairs, self._keys, self._history = pairs, keys, history
         self._mu_pair = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
         if self.damping_ratio > 0.0:
@@ -351,10 +360,12 @@ class ContactSet:
             self._damp_pair = 2.0 * self.damping_ratio * np.sqrt(mi * mj / (mi + mj))
         else:
             self._damp_pair = np.zeros(len(pairs))
-        self._pair_force = np.zeros((len(pairs), kc.N_OUT))
-        self._touching = np.zeros(len(pairs), np.uint8)
-        self._inc_ptr, self._inc_code = kc.pair_incidence(pairs[:, 0].copy(), pairs[:, 1].copy(),
-                                                          self._slot, self._active.size)
+        self._pair_i = np.ascontiguousarray(pairs[:, 0])
+        self._pair_j = np.ascontiguousarray(pairs[:, 1])
+        self._bounds = kc.chunk_bounds(self._pair_i, min(1024, max(1, len(pairs) // 128)))
+        self._f_target = np.zeros((len(pairs), 6))
+        self._touching = touching
+        self._inc_ptr, self._inc_pair = kc.target_incidence(self._pair_j, self._slot, self._active.size)
         self._x_search = x.copy()
         self._needs_search = False
         self.n_searches += 1
@@ -387,10 +398,10 @@ class ContactSet:
             self._e_normal = 0.0
             self._e_tangential = 0.0
             return
-        e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self.pairs[:, 0], self.pairs[:, 1], self.penalty,
+        e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
                                             self._mu_pair, self.tangential_ratio, self._damp_pair, float(dt),
-                                            self._history, self._pair_force, self._touching)
-        kc.gather_forces(f, self._active, self._inc_ptr, self._inc_code, self._pair_force, self._touching)
+                                            self._history, self._f_target, self._touching, f)
+        kc.gather_forces(f, self._active, self._inc_ptr, self._inc_pair, self._f_target, self._touching)
         self._e_normal = e_n
         self._e_tangential = e_t
         self._w_friction += w_f
@@ -442,13 +453,9 @@ class ContactSet:
         pairs = candidate_pairs(x, self._active, self._bond, 0.0, self.cell_size)
         if len(pairs) == 0:
             return
-        n = len(pairs)
-        out = np.zeros((n, kc.N_OUT))
-        kc.pair_forces(np.ascontiguousarray(x, dtype=np.float64), np.zeros_like(x, dtype=np.float64),
-                       pairs[:, 0].copy(), pairs[:, 1].copy(), 1.0, np.zeros(n), 1.0, np.zeros(n), 0.0,
-                       np.zeros((n, 4)), out, np.zeros(n, np.uint8))
+        overlap = kc.overlap_areas(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(pairs[:, 0]),
+                                   np.ascontiguousarray(pairs[:, 1]))
         area = np.abs(triangle_areas(x, self.topology.triangles))
-        overlap = out[:, 12]
         bad = np.flatnonzero(overlap > rel_tol * np.minimum(area[pairs[:, 0]], area[pairs[:, 1]]))
         if bad.size:
             i, j = (int(t) for t in pairs[bad[0]])

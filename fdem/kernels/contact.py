@@ -6,9 +6,9 @@ bodies", IJNME 49:1377-1396; Munjiza (2004), *The Combined Finite-Discrete Eleme
 
 Potential of a triangle (dimensionless)
 ---------------------------------------
-With barycentric coordinates ``lambda_k(x) = a_k + b_k . x`` of the current triangle (``lambda_k``
-belongs to corner ``k``; ``A_k = lambda_k A`` is the area of the sub-triangle between ``x`` and
-the edge opposite ``k``)::
+With barycentric coordinates ``lambda_k(x) = 1/3 + b_k . (x - G)`` of the current triangle
+(``lambda_k`` belongs to corner ``k``, ``G`` is the centroid, ``b_k = rot(P_{k+1} - P_{k+2}) / 2A``
+the inward normal of the edge opposite ``k`` divided by the altitude on it)::
 
     phi(x) = 3 min_k lambda_k(x)          (0 on the boundary, 1 at the centroid)
 
@@ -33,16 +33,45 @@ and symmetrically for ``t``. So the contact is conservative (a potential exists 
 motions, not only rigid ones), ``sum F = 0`` and ``sum x x F = 0`` exactly (``E`` is invariant
 under rigid motions of the pair), and the force is zero when the triangles do not overlap.
 
-Evaluation (all integrals exact): the overlap ``D`` is built once as a closed polygon (``c``
-clipped by ``t``'s half-planes; robust when edges touch, where it degenerates to zero area);
-each edge of ``D`` lies on the boundary of ``c`` or of ``t``. One pass over those edges gives
-both triangles' sector moments ``int_{D cap S_k} (1, x, y) dA`` (signed fans from each centroid,
-split where the edge crosses a median) and the edge integrals of the other's potential
-(products of linear functions between the kinks of ``min lambda``).
+Evaluation (all integrals exact)
+--------------------------------
+1. Separating-axis test on the six edges with orientation determinants of raw coordinate
+   differences, ``2A_t lambda^t_j(x) = (P^t_{j+1} - x) x (P^t_{j+2} - x)``, in strict
+   arithmetic: exact zeros for corners lying on an edge of the other triangle (touching
+   counts as apart). Most candidate pairs of a settled pile end here after 18 differences
+   and 18 determinants, inlined in the pair loop (no call, no reference counting).
+2. Overlap polygon ``D``: ``c`` clipped by the half-planes of ``t`` that cut one of ``c``'s
+   corners off (Sutherland-Hodgman on a pool of vertices referenced by index, so a kept
+   corner costs one index copy). Each corner carries
+   both triangles' barycentrics (interpolated: exact, they are affine); each edge of ``D``
+   carries a *label*, the triangle edge it lies on (``c``'s edge ``m`` or ``t``'s edge ``j``).
+3. Area terms by parts. ``grad phi_q = 3 b_k`` on ``S_k``, ``grad lambda_i = b_i``, so
+   ``3 sum_k b_k int_{D cap S_k} lambda_i dA = int_D grad(phi_q) lambda_i dA
+   = oint_dD phi_q lambda_i n dGamma - b_i int_D phi_q dA``, and ``phi_q = 0`` on ``q``'s own
+   boundary: only the edges of ``D`` on the *other* triangle's boundary contribute. With
+   ``lambda_i(x) = 1/3 + b_i . (x - G)`` all nodal forces of a pair reduce to two sums over
+   the edges ``a -> b = a + d`` of ``D`` (``s = -1`` on ``c``'s edges, ``+1`` on ``t``'s,
+   ``n dGamma = (dy, -dx) ds``, ``f = max(min_k lambda^q_k, 0)`` of the triangle ``q`` that
+   does not own the edge, ``I_f = int_0^1 f ds``, ``I_fs = int_0^1 f s ds``)::
 
-Parallelism: pair results are stored per pair and gathered per triangle (a triangle writes only
-its own nodes), so there are no races and the forces are bitwise independent of the thread
-count. Below ``PARALLEL_MIN_PAIRS`` pairs the per-step kernels run serially.
+       N = sum s n I_f,     T = sum s n (x) (a I_f + d I_fs)        (a about c's centroid)
+       F_i^c = 3p (N / 3 + T b_i^c) - p b_i^c int_D phi_c dA
+       F_i^t = 3p (-N / 3 + (N (x) G_t - T) b_i^t) - p b_i^t int_D phi_t dA
+
+   and the energy from fans: ``phi_q`` is linear on the fan ``(G_q, u, w)`` of a piece of an
+   edge inside one sector, so ``int_D phi_q dA = area(D) / 3 + sum (a - G_q) x d I_f`` over
+   the other triangle's edges. ``f`` is linear between the kinks of ``min_k lambda^q_k``
+   along an edge (at most two: the argmin visits each index once), so ``I_f`` and ``I_fs``
+   are exact (trapezoids; ``h (2 f_u u + f_u w + f_w u + 2 f_w w) / 6`` per piece).
+
+Parallelism
+-----------
+Pairs come sorted by their first triangle ``i`` (the contactor ``c``), and the pair loop is cut
+into chunks at changes of ``i``: a chunk owns its contactors, so it adds their forces straight
+into ``f`` (summed over consecutive pairs in registers). The target side is stored per pair (six
+numbers) and gathered per triangle afterwards (a triangle writes only its own nodes), so there
+are no races and the forces are bitwise independent of the thread count (the chunking depends
+on the pair list only). Below ``PARALLEL_MIN_PAIRS`` pairs the per-step kernels run serially.
 
 Units: coordinates [m], penalty [Pa], forces [N/m], energies [J/m] (plane, per unit thickness).
 """
@@ -51,86 +80,84 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-# Layout of the per-pair output row of ``pair_normal`` (and of ``pair_force`` in the loop).
-N_OUT = 16
-"""out[0:6] forces on c's corners (x0, y0, x1, y1, x2, y2) [N/m]; out[6:12] forces on t's
-corners; out[12] overlap area [m^2]; out[13:15] overlap centroid (local frame) [m]."""
-MAX_POLY = 8
-"""A triangle clipped by three half-planes has at most six corners; buffers hold eight."""
+N_OUT = 12
+"""Nodal forces of a pair written by :func:`pair_normal` to ``w[0:12]``: on c's corners
+(x0, y0, x1, y1, x2, y2) [N/m], then on t's corners."""
+N_WORK = N_OUT
+"""Length of the float work vector of :func:`pair_normal`."""
+MAX_VERT = 16
+"""Vertex pool of the overlap polygon: 3 corners + at most 2 + 4 + 6 new ones (two per pass for
+a convex polygon; the bound also covers round-off on degenerate ones)."""
 N_COL = 8
-"""Columns of a polygon corner: x, y, the target's three and the contactor's three barycentrics."""
-N_SCRATCH = 64
-"""Length of the per-thread scratch vector of :func:`pair_normal`."""
+"""Columns of a polygon vertex: x, y (frame at c's centroid), t's three, c's three barycentrics."""
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+"""Fast-math flags of the narrow phase (no ``nnan``/``ninf``: NaNs still propagate). The
+separating-axis determinants (:func:`_sat`) are compiled strictly, so that touching corners
+give exact zeros (no fused multiply-add)."""
 PARALLEL_MIN_PAIRS = 4096
 """Below this many candidate pairs the per-step kernels run serially: waking the thread pool
 costs more than the work (and far more on a loaded machine, where OpenMP workers spin)."""
 
+# Layout of the int work vector (offsets; no array views in the hot path): two index lists
+# (ping-pong between clipping passes) at 0 and MAX_VERT, their edge labels at _L0 and
+# _L0 + MAX_VERT. Label of the edge ending at a vertex: m < 3 c's edge opposite corner m,
+# 3 + j t's edge opposite corner j.
+_L0 = 2 * MAX_VERT
+N_IWORK = 4 * MAX_VERT
+
 
 # ----------------------------------------------------------------------------- geometry helpers
-# Scratch layout of pair_normal (offsets into one float64 vector; no array views are made in
-# the hot path: each view costs reference-count traffic).
-_COEF = 0    # 18: (a, bx, by) of lambda_0..2 of c, then of t
-_LAM = 18    # 18: t's lambdas at c's corners (3i + j), then c's lambdas at t's corners
-_ACC_C = 36  # 9: (area, int x, int y) of D cap S_k of c, k = 0..2
-_ACC_T = 45  # 9: the same for t
+@njit(cache=True, error_model="numpy", inline="always")
+def _orient(ux, uy, wx, wy):
+    """``u x w``; with ``u = P_{j+1} - x``, ``w = P_{j+2} - x`` it is ``2A lambda_j(x)``."""
+    return ux * wy - uy * wx
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _bary_coeffs(pts, o, sc, co):
-    """Barycentric coefficients of the triangle at ``pts[o:o+6]``: ``lambda_k = a + bx x + by y``.
-
-    Writes ``sc[co + 3k : co + 3k + 3] = (a_k, bx_k, by_k)``. ``b_k = rot(P_{k+2} - P_{k+1}) / (2A)``
-    is the inward normal of the edge opposite ``k`` divided by the altitude on it.
-    """
-    x0, y0, x1, y1, x2, y2 = pts[o], pts[o + 1], pts[o + 2], pts[o + 3], pts[o + 4], pts[o + 5]
-    inv = 1.0 / ((x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0))
-    # lambda_0 = cross(P1 - x, P2 - x) / 2A, and cyclic.
-    sc[co + 0] = (x1 * y2 - x2 * y1) * inv
-    sc[co + 1] = (y1 - y2) * inv
-    sc[co + 2] = (x2 - x1) * inv
-    sc[co + 3] = (x2 * y0 - x0 * y2) * inv
-    sc[co + 4] = (y2 - y0) * inv
-    sc[co + 5] = (x0 - x2) * inv
-    sc[co + 6] = (x0 * y1 - x1 * y0) * inv
-    sc[co + 7] = (y0 - y1) * inv
-    sc[co + 8] = (x1 - x0) * inv
+def _max3(a, b, c):
+    return max(a, max(b, c))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _clip(poly, sb, n, db, c):
-    """Sutherland-Hodgman: keep the part of polygon ``poly[sb, :n]`` where column ``c`` is ``>= 0``.
-
-    Rows are ``(x, y, lambda^t_0..2, lambda^c_0..2)``: each corner carries both triangles'
-    barycentric coordinates, interpolated (exactly: they are affine) at new corners, so no
-    half-plane is evaluated twice; the clipping column is set to exactly 0 on new corners.
-    Writes ``poly[db]`` and returns its corner count.
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _clip(pool, nv, iw, src, dst, lsrc, ldst, n, col, label_new):
+    """Sutherland-Hodgman on indices: keep the part of the polygon ``iw[src:src+n]`` (vertex ids
+    into ``pool``; ``iw[lsrc + e]`` labels the edge ending at vertex ``e``) where column ``col``
+    is ``>= 0``; new vertices are appended to ``pool`` from ``nv`` on, interpolated in every
+    column (exact 0 in ``col``), and the new edge along the clipping line gets ``label_new``.
+    Returns ``(n_out, nv)``.
     """
     m = 0
-    p = n - 1
-    dp = poly[sb, p, c]
-    for i in range(n):
-        dq = poly[sb, i, c]
-        if (dq >= 0.0) != (dp >= 0.0):
+    p = iw[src + n - 1]
+    dp = pool[p, col]
+    for e in range(n):
+        i = iw[src + e]
+        dq = pool[i, col]
+        pin = dp >= 0.0
+        qin = dq >= 0.0
+        if pin != qin:
             s = dp / (dp - dq)
             for r in range(N_COL):
-                poly[db, m, r] = poly[sb, p, r] + s * (poly[sb, i, r] - poly[sb, p, r])
-            poly[db, m, c] = 0.0
+                pool[nv, r] = pool[p, r] + s * (pool[i, r] - pool[p, r])
+            pool[nv, col] = 0.0
+            iw[dst + m] = nv
+            iw[ldst + m] = iw[lsrc + e] if pin else label_new
+            nv += 1
             m += 1
-        if dq >= 0.0:
-            for r in range(N_COL):
-                poly[db, m, r] = poly[sb, i, r]
+        if qin:
+            iw[dst + m] = i
+            iw[ldst + m] = iw[lsrc + e]
             m += 1
         p = i
         dp = dq
-    return m
+    return m, nv
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 def _pick(k, v0, v1, v2):
     return v0 if k == 0 else (v1 if k == 1 else v2)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 def _kinks(l0, l1, l2, d0, d1, d2):
     """Where ``min_j (l_j + s d_j)``, ``s in [0, 1]``, changes its argmin.
 
@@ -138,7 +165,7 @@ def _kinks(l0, l1, l2, d0, d1, d2):
     visits each index at most once: equal argmins at both ends mean one piece; otherwise the
     two end indices cross once, unless the third is smaller there (then two kinks).
     Returns ``(s1, s2, k_first, k_middle, k_last)``: pieces ``[0, s1]``, ``[s1, s2]``,
-    ``[s2, 1]`` (some possibly empty) with those argmins.
+    ``[s2, 1]`` (some possibly empty) with those argmins (all three valid indices).
     """
     ka = 0
     va = l0
@@ -170,7 +197,7 @@ def _kinks(l0, l1, l2, d0, d1, d2):
     den = da - db
     s = min(max((lb - la) / den, 0.0), 1.0) if den != 0.0 else 0.5
     if lm + s * dm >= la + s * da:
-        return s, s, ka, ka, kb
+        return s, s, ka, km, kb
     den = da - dm
     s1 = min(max((lm - la) / den, 0.0), 1.0) if den != 0.0 else 0.0
     den = dm - db
@@ -178,185 +205,276 @@ def _kinks(l0, l1, l2, d0, d1, d2):
     return s1, s2, ka, km, kb
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _fan(sc, acc, k, gx, gy, ux, uy, wx, wy):
-    """Add the triangle ``(G, u, w)`` (``u``, ``w`` relative to ``G``) to the moments of sector k."""
-    area = 0.5 * (ux * wy - uy * wx)
-    sc[acc + 3 * k] += area
-    sc[acc + 3 * k + 1] += area * (gx + (ux + wx) / 3.0)
-    sc[acc + 3 * k + 2] += area * (gy + (uy + wy) / 3.0)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _fmin(s, l0, l1, l2, d0, d1, d2):
+    """``max(min_k (l_k + s d_k), 0)``: the (clamped) smallest barycentric at ``a + s d``."""
+    return max(min(l0 + s * d0, min(l1 + s * d1, l2 + s * d2)), 0.0)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _piece(u, w, k, l0, l1, l2, d0, d1, d2, sc, acc_q, gqx, gqy, rx, ry, dx, dy):
-    """One piece ``[u, w]`` of an overlap edge inside the other triangle's sector ``k``: add its
-    fan to the moments at ``acc_q``; return ``(int f ds, int f s ds)`` of ``f = lambda^q_k``."""
-    if w <= u:
-        return 0.0, 0.0
-    _fan(sc, acc_q, k, gqx, gqy, rx + u * dx, ry + u * dy, rx + w * dx, ry + w * dy)
-    lk = _pick(k, l0, l1, l2)
-    dk = _pick(k, d0, d1, d2)
-    fu = max(lk + u * dk, 0.0)
-    fw = max(lk + w * dk, 0.0)
-    h = w - u
-    return 0.5 * h * (fu + fw), h / 6.0 * (2.0 * fu * u + fu * w + fw * u + 2.0 * fw * w)
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _edge_integrals(pool, a, b, lq):
+    """``(int_0^1 f ds, int_0^1 f s ds)`` along the overlap edge ``a -> b`` of
+    ``f = max(min_k lambda^q_k, 0)``, ``lambda^q`` in columns ``lq:lq+3`` of ``pool``.
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _edge_pass(poly, sb, a, b, gox, goy, gqx, gqy, lo, lq, sc, acc_o, acc_q, p3, out, q, fo, m_o):
-    """Contributions of one edge ``a -> b`` of the overlap polygon ``poly[sb]``, lying on the
-    boundary of the *owner* triangle ``o`` (its edge opposite corner ``m_o``), to both triangles.
-
-    * owner's sector moments: the whole edge lies in the owner's sub-triangle ``m_o``;
-    * other triangle ``q``'s sector moments: the edge split at the kinks of ``min lambda^q``;
-    * owner's edge term ``-3p n int lambda^q_min lambda^o_i dGamma`` on the same pieces (exact:
-      products of linear functions), ``n dGamma = (dy, -dx) ds``, added to ``out[q, fo:fo+6]``.
-
-    ``(gox, goy)``, ``(gqx, gqy)``: centroids; ``lo``/``lq``: first columns of the owner's /
-    other's barycentrics in ``poly``; ``acc_o``/``acc_q``: offsets of their moments in ``sc``.
+    ``f`` is linear between the kinks ``0 <= s1 <= s2 <= 1`` of the minimum, so both integrals
+    are exact: trapezoids for ``int f``, ``h (2 f_u u + f_u w + f_w u + 2 f_w w) / 6`` for
+    ``int f s`` on a piece ``[u, w]`` of length ``h``.
     """
-    ax = poly[sb, a, 0]
-    ay = poly[sb, a, 1]
-    bx = poly[sb, b, 0]
-    by = poly[sb, b, 1]
-    dx = bx - ax
-    dy = by - ay
-    _fan(sc, acc_o, m_o, gox, goy, ax - gox, ay - goy, bx - gox, by - goy)
-    l0 = poly[sb, a, lq]
-    l1 = poly[sb, a, lq + 1]
-    l2 = poly[sb, a, lq + 2]
-    d0 = poly[sb, b, lq] - l0
-    d1 = poly[sb, b, lq + 1] - l1
-    d2 = poly[sb, b, lq + 2] - l2
+    l0 = pool[a, lq]
+    l1 = pool[a, lq + 1]
+    l2 = pool[a, lq + 2]
+    d0 = pool[b, lq] - l0
+    d1 = pool[b, lq + 1] - l1
+    d2 = pool[b, lq + 2] - l2
     s1, s2, k1, k2, k3 = _kinks(l0, l1, l2, d0, d1, d2)
-    rx = ax - gqx
-    ry = ay - gqy
-    f1, fs1 = _piece(0.0, s1, k1, l0, l1, l2, d0, d1, d2, sc, acc_q, gqx, gqy, rx, ry, dx, dy)
-    f2, fs2 = _piece(s1, s2, k2, l0, l1, l2, d0, d1, d2, sc, acc_q, gqx, gqy, rx, ry, dx, dy)
-    f3, fs3 = _piece(s2, 1.0, k3, l0, l1, l2, d0, d1, d2, sc, acc_q, gqx, gqy, rx, ry, dx, dy)
-    i_f = p3 * (f1 + f2 + f3)
-    i_fs = p3 * (fs1 + fs2 + fs3)
-    # owner's shape functions along the edge: g_i(s) = g_i(a) + s (g_i(b) - g_i(a))
-    for i in range(3):
-        ga = poly[sb, a, lo + i]
-        val = ga * i_f + (poly[sb, b, lo + i] - ga) * i_fs
-        out[q, fo + 2 * i] -= dy * val
-        out[q, fo + 2 * i + 1] += dx * val
+    f0 = max(min(l0, min(l1, l2)), 0.0)
+    f3 = _fmin(1.0, l0, l1, l2, d0, d1, d2)
+    if k1 == k3:   # one piece
+        return 0.5 * (f0 + f3), (f0 + 2.0 * f3) / 6.0
+    f1 = _fmin(s1, l0, l1, l2, d0, d1, d2)
+    f2 = _fmin(s2, l0, l1, l2, d0, d1, d2)
+    h1 = s1
+    h2 = s2 - s1
+    h3 = 1.0 - s2
+    i_f = 0.5 * (h1 * (f0 + f1) + h2 * (f1 + f2) + h3 * (f2 + f3))
+    i_fs = (h1 * (f0 * s1 + 2.0 * f1 * s1)
+            + h2 * (2.0 * f1 * s1 + f1 * s2 + f2 * s1 + 2.0 * f2 * s2)
+            + h3 * (2.0 * f2 * s2 + f2 + f3 * s2 + 2.0 * f3)) / 6.0
+    return i_f, i_fs
+
+
+@njit(cache=True, error_model="numpy")
+def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """Separating-axis test of triangles c and t on their six edges, in strict arithmetic (no
+    fast-math, and scalars only, so that it costs no reference counting: corners lying on the
+    other's edge give exact zeros, and touching counts as apart).
+
+    ``u_ij = 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}`` and
+    ``v_kj = 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}`` with ``D_ik = t_k - c_i``; the pair
+    is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``.
+    Returns ``(overlap?, u00, u01, ..., u22)``.
+    """
+    # differences D_ik = t_k - c_i
+    d00x = t0x - c0x
+    d00y = t0y - c0y
+    d01x = t1x - c0x
+    d01y = t1y - c0y
+    d02x = t2x - c0x
+    d02y = t2y - c0y
+    d10x = t0x - c1x
+    d10y = t0y - c1y
+    d11x = t1x - c1x
+    d11y = t1y - c1y
+    d12x = t2x - c1x
+    d12y = t2y - c1y
+    d20x = t0x - c2x
+    d20y = t0y - c2y
+    d21x = t1x - c2x
+    d21y = t1y - c2y
+    d22x = t2x - c2x
+    d22y = t2y - c2y
+    # 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}
+    u00 = _orient(d01x, d01y, d02x, d02y)
+    u01 = _orient(d02x, d02y, d00x, d00y)
+    u02 = _orient(d00x, d00y, d01x, d01y)
+    u10 = _orient(d11x, d11y, d12x, d12y)
+    u11 = _orient(d12x, d12y, d10x, d10y)
+    u12 = _orient(d10x, d10y, d11x, d11y)
+    u20 = _orient(d21x, d21y, d22x, d22y)
+    u21 = _orient(d22x, d22y, d20x, d20y)
+    u22 = _orient(d20x, d20y, d21x, d21y)
+    # 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}
+    v00 = _orient(d10x, d10y, d20x, d20y)
+    v01 = _orient(d20x, d20y, d00x, d00y)
+    v02 = _orient(d00x, d00y, d10x, d10y)
+    v10 = _orient(d11x, d11y, d21x, d21y)
+    v11 = _orient(d21x, d21y, d01x, d01y)
+    v12 = _orient(d01x, d01y, d11x, d11y)
+    v20 = _orient(d12x, d12y, d22x, d22y)
+    v21 = _orient(d22x, d22y, d02x, d02y)
+    v22 = _orient(d02x, d02y, d12x, d12y)
+    sep = min(min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22))),
+              min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22))))
+    return sep > 0.0, u00, u01, u02, u10, u11, u12, u20, u21, u22
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _area_terms(sc, co, acc, p3, out, q, fo):
-    """Area term ``3p sum_k b_k int_{D cap S_k} lambda_i dA`` of one triangle's nodal forces;
-    returns its part ``p int_D phi dA`` of the energy."""
-    energy = 0.0
-    for k in range(3):
-        area = sc[acc + 3 * k]
-        mx = sc[acc + 3 * k + 1]
-        my = sc[acc + 3 * k + 2]
-        bxk = p3 * sc[co + 3 * k + 1]
-        byk = p3 * sc[co + 3 * k + 2]
-        for i in range(3):
-            ii = sc[co + 3 * i] * area + sc[co + 3 * i + 1] * mx + sc[co + 3 * i + 2] * my
-            out[q, fo + 2 * i] += bxk * ii
-            out[q, fo + 2 * i + 1] += byk * ii
-        energy += p3 * (sc[co + 3 * k] * area + sc[co + 3 * k + 1] * mx + sc[co + 3 * k + 2] * my)
-    return energy
+def _corners(x, i, j):
+    """The six corners ``c0x, c0y, ..., t2y`` of triangles ``i`` (c) and ``j`` (t)."""
+    ix = 3 * i
+    jx = 3 * j
+    return (x[ix, 0], x[ix, 1], x[ix + 1, 0], x[ix + 1, 1], x[ix + 2, 0], x[ix + 2, 1],
+            x[jx, 0], x[jx, 1], x[jx + 1, 0], x[jx + 1, 1], x[jx + 2, 0], x[jx + 2, 1])
 
 
 # ----------------------------------------------------------------------------- per-pair laws
-@njit(cache=True, error_model="numpy")
-def pair_normal(pts, penalty, out, q, sc, poly):
+_NONE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+"""What :func:`pair_normal` returns for a pair that does not overlap."""
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def pair_normal(x, i, j, penalty, w, iw, pool):
     """Distributed-potential normal contact of one triangle pair (the per-pair law).
 
     Parameters
     ----------
-    pts : (12,) float64
-        Corners ``c0x, c0y, c1x, c1y, c2x, c2y, t0x, ..., t2y`` of contactor ``c`` and target
-        ``t`` (both counter-clockwise) in a local frame near the pair [m].
+    x : (n_nodes, 2) float64
+        Node positions [m]; triangle ``t`` has nodes ``3t, 3t+1, 3t+2`` (counter-clockwise).
+    i, j : int
+        Contactor ``c`` and target ``t``.
     penalty : float
         ``p`` [Pa]; ``E = p int_D (phi_c + phi_t) dA``.
-    out : (n, N_OUT) float64, q : int
-        Row ``q`` is overwritten: nodal forces on ``c`` (0:6) and ``t`` (6:12) [N/m], overlap
-        area (12) [m^2], overlap centroid (13:15) [m].
-    sc : (N_SCRATCH,) float64, poly : (2, MAX_POLY, N_COL) float64
-        Work space.
+    w : (N_WORK,) float64, iw : (N_IWORK,) int64, pool : (MAX_VERT, N_COL) float64
+        Work space. On return ``w[0:12]`` holds the nodal forces on ``c`` (0:6) and ``t`` (6:12)
+        [N/m] when the triangles overlap (it is not written otherwise).
 
     Returns
     -------
-    float
-        Pair energy ``E`` [J/m]; 0 (and zero forces) when the triangles do not overlap.
-
-    Steps: barycentric coefficients of both; separating-axis test (touching counts as apart);
-    overlap polygon ``D`` = ``c`` clipped by ``t``'s three half-planes, each corner carrying
-    both triangles' barycentrics (exact zeros on the clipping lines, so every edge of ``D``
-    knows which triangle's boundary it lies on); one pass over the edges of ``D`` gives both
-    triangles' sector moments (fans from their centroids) and edge integrals.
+    (E, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
+        Pair energy ``E`` [J/m]; overlap area [m^2] (0 when apart or touching: then nothing
+        else is meaningful); overlap centroid ``(gx, gy)`` and t's centroid ``(gtx, gty)``, both
+        relative to c's centroid [m]; the barycentric gradients ``b_k`` of c and of t [1/m]
+        (``lambda_k = 1/3 + b_k . (x - G)``, for the friction point).
     """
-    for i in range(N_OUT):
-        out[q, i] = 0.0
-    _bary_coeffs(pts, 0, sc, _COEF)
-    _bary_coeffs(pts, 6, sc, _COEF + 9)
-    for i in range(3):
-        xc, yc = pts[2 * i], pts[2 * i + 1]
-        xt, yt = pts[6 + 2 * i], pts[7 + 2 * i]
-        for j in range(3):
-            sc[_LAM + 3 * i + j] = sc[_COEF + 9 + 3 * j] + sc[_COEF + 10 + 3 * j] * xc + sc[_COEF + 11 + 3 * j] * yc
-            sc[_LAM + 9 + 3 * i + j] = sc[_COEF + 3 * j] + sc[_COEF + 3 * j + 1] * xt + sc[_COEF + 3 * j + 2] * yt
-    # separating-axis test on the six edges (touching counts as apart)
-    for j in range(3):
-        if sc[_LAM + j] <= 0.0 and sc[_LAM + 3 + j] <= 0.0 and sc[_LAM + 6 + j] <= 0.0:
-            return 0.0
-        if sc[_LAM + 9 + j] <= 0.0 and sc[_LAM + 12 + j] <= 0.0 and sc[_LAM + 15 + j] <= 0.0:
-            return 0.0
-    # overlap polygon: c clipped by t (columns 2:5 t's barycentrics, 5:8 c's)
-    for i in range(3):
-        poly[0, i, 0] = pts[2 * i]
-        poly[0, i, 1] = pts[2 * i + 1]
-        for j in range(3):
-            poly[0, i, 2 + j] = sc[_LAM + 3 * i + j]
-            poly[0, i, 5 + j] = 1.0 if i == j else 0.0
+    c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
+    hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                            t0x, t0y, t1x, t1y, t2x, t2y)
+    if not hit:
+        return _NONE
+    return _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
+                    u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
+             u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool):
+    """:func:`pair_normal` of a pair that passed the separating-axis test (corners and
+    ``u_ij = 2A_t lambda^t_j(c_i)`` from :func:`_sat`): overlap polygon, edge integrals, forces."""
+    # local frame at c's centroid; barycentric gradients b_k = rot(P_{k+1} - P_{k+2}) / 2A
+    ox = (c0x + c1x + c2x) / 3.0
+    oy = (c0y + c1y + c2y) / 3.0
+    ic = 1.0 / ((c1x - c0x) * (c2y - c0y) - (c1y - c0y) * (c2x - c0x))
+    it = 1.0 / ((t1x - t0x) * (t2y - t0y) - (t1y - t0y) * (t2x - t0x))
+    bc0x = (c1y - c2y) * ic
+    bc0y = (c2x - c1x) * ic
+    bc1x = (c2y - c0y) * ic
+    bc1y = (c0x - c2x) * ic
+    bc2x = (c0y - c1y) * ic
+    bc2y = (c1x - c0x) * ic
+    bt0x = (t1y - t2y) * it
+    bt0y = (t2x - t1x) * it
+    bt1x = (t2y - t0y) * it
+    bt1y = (t0x - t2x) * it
+    bt2x = (t0y - t1y) * it
+    bt2y = (t1x - t0x) * it
+    gtx = (t0x + t1x + t2x) / 3.0 - ox
+    gty = (t0y + t1y + t2y) / 3.0 - oy
+    # overlap polygon: c's corners (columns 2:5 t's barycentrics, 5:8 c's), clipped by t
+    pool[0, 0] = c0x - ox
+    pool[0, 1] = c0y - oy
+    pool[0, 2] = u00 * it
+    pool[0, 3] = u01 * it
+    pool[0, 4] = u02 * it
+    pool[1, 0] = c1x - ox
+    pool[1, 1] = c1y - oy
+    pool[1, 2] = u10 * it
+    pool[1, 3] = u11 * it
+    pool[1, 4] = u12 * it
+    pool[2, 0] = c2x - ox
+    pool[2, 1] = c2y - oy
+    pool[2, 2] = u20 * it
+    pool[2, 3] = u21 * it
+    pool[2, 4] = u22 * it
+    for r in range(3):
+        for k in range(3):
+            pool[r, 5 + k] = 1.0 if r == k else 0.0
+        iw[r] = r
+        iw[_L0 + r] = (r + 1) % 3   # edge (r-1 -> r) is c's edge opposite corner r+1
     n = 3
-    sb = 0
-    for j in range(3):
-        lo = poly[sb, 0, 2 + j]
-        for r in range(1, n):
-            lo = min(lo, poly[sb, r, 2 + j])
-        if lo < 0.0:  # this half-plane cuts (the SAT ruled out "all outside" for the triangle)
-            n = _clip(poly, sb, n, 1 - sb, 2 + j)
-            sb = 1 - sb
+    nv = 3
+    src = 0
+    # t's half-plane j cuts c iff one of c's corners lies outside it; c (and every polygon clipped
+    # from it) then lies inside the others, so the corners decide for all three passes
+    cut0 = min(u00, min(u10, u20)) < 0.0
+    cut1 = min(u01, min(u11, u21)) < 0.0
+    cut2 = min(u02, min(u12, u22)) < 0.0
+    for jj in range(3):
+        if cut0 if jj == 0 else (cut1 if jj == 1 else cut2):
+            n, nv = _clip(pool, nv, iw, src * MAX_VERT, (1 - src) * MAX_VERT, _L0 + src * MAX_VERT,
+                          _L0 + (1 - src) * MAX_VERT, n, 2 + jj, 3 + jj)
+            src = 1 - src
             if n < 3:
-                return 0.0
-    for r in range(18):
-        sc[_ACC_C + r] = 0.0
+                return _NONE
+    # one pass over the edges of D (see the module docstring, "Evaluation")
+    area2 = 0.0    # 2 area(D)
+    mx6 = 0.0      # 6 int_D x dA, 6 int_D y dA (about c's centroid)
+    my6 = 0.0
+    phi_c = 0.0    # int_D phi dA - area / 3 of c and of t: sum over the other's edges of 2 fan x int f
+    phi_t = 0.0
+    nx = 0.0       # N = sum s n int f ds  (s = -1 on c's edges, +1 on t's; n dGamma = (dy, -dx) ds)
+    ny = 0.0
+    txx = 0.0      # T = sum s n (x) m,  m = a int f ds + d int f s ds  (a about c's centroid)
+    txy = 0.0
+    tyx = 0.0
+    tyy = 0.0
+    base = src * MAX_VERT
+    a = iw[base + n - 1]
+    for e in range(n):
+        b = iw[base + e]
+        c_owns = iw[_L0 + base + e] < 3
+        ax = pool[a, 0]
+        ay = pool[a, 1]
+        dx = pool[b, 0] - ax
+        dy = pool[b, 1] - ay
+        cr = ax * dy - ay * dx                  # a x b: twice the fan from c's centroid
+        area2 += cr
+        mx6 += cr * (2.0 * ax + dx)
+        my6 += cr * (2.0 * ay + dy)
+        # f = min lambda of the triangle that does not own the edge
+        i_f, i_fs = _edge_integrals(pool, a, b, 2 if c_owns else 5)
+        if c_owns:     # t's potential on c's boundary: fan from t's centroid
+            phi_t += (cr - (gtx * dy - gty * dx)) * i_f
+        else:
+            phi_c += cr * i_f
+        sx = -dy if c_owns else dy
+        sy = dx if c_owns else -dx
+        mx = ax * i_f + dx * i_fs
+        my = ay * i_f + dy * i_fs
+        nx += sx * i_f
+        ny += sy * i_f
+        txx += sx * mx
+        txy += sx * my
+        tyx += sy * mx
+        tyy += sy * my
+        a = b
+    if not area2 > 0.0:
+        return _NONE
+    area = 0.5 * area2
+    # int_D phi dA = area / 3 + 2 sum (fan area x int f ds) over the other's edges
+    ic_ = area / 3.0 + phi_c
+    it_ = area / 3.0 + phi_t
     p3 = 3.0 * penalty
-    gcx = (pts[0] + pts[2] + pts[4]) / 3.0
-    gcy = (pts[1] + pts[3] + pts[5]) / 3.0
-    gtx = (pts[6] + pts[8] + pts[10]) / 3.0
-    gty = (pts[7] + pts[9] + pts[11]) / 3.0
-    for a in range(n):
-        b = a + 1 if a + 1 < n else 0
-        # which boundary does the edge lie on? (exact zeros, see above)
-        m_c = -1
-        for m in range(3):
-            if poly[sb, a, 5 + m] == 0.0 and poly[sb, b, 5 + m] == 0.0:
-                m_c = m
-        if m_c >= 0:
-            _edge_pass(poly, sb, a, b, gcx, gcy, gtx, gty, 5, 2, sc, _ACC_C, _ACC_T, p3, out, q, 0, m_c)
-            continue
-        m_t = 0
-        for m in range(3):
-            if poly[sb, a, 2 + m] == 0.0 and poly[sb, b, 2 + m] == 0.0:
-                m_t = m
-        _edge_pass(poly, sb, a, b, gtx, gty, gcx, gcy, 2, 5, sc, _ACC_T, _ACC_C, p3, out, q, 6, m_t)
-    area = sc[_ACC_C] + sc[_ACC_C + 3] + sc[_ACC_C + 6]
-    if area <= 0.0:
-        for i in range(12):
-            out[q, i] = 0.0
-        return 0.0
-    out[q, 12] = area
-    out[q, 13] = (sc[_ACC_C + 1] + sc[_ACC_C + 4] + sc[_ACC_C + 7]) / area
-    out[q, 14] = (sc[_ACC_C + 2] + sc[_ACC_C + 5] + sc[_ACC_C + 8]) / area
-    return _area_terms(sc, _COEF, _ACC_C, p3, out, q, 0) + _area_terms(sc, _COEF + 9, _ACC_T, p3, out, q, 6)
+    # F_i = 3p (N / 3 + T b_i) - p b_i int_D phi dA on c; on t -N and T_t = -T + N (x) G_t
+    w[0] = penalty * nx + p3 * (txx * bc0x + txy * bc0y) - penalty * bc0x * ic_
+    w[1] = penalty * ny + p3 * (tyx * bc0x + tyy * bc0y) - penalty * bc0y * ic_
+    w[2] = penalty * nx + p3 * (txx * bc1x + txy * bc1y) - penalty * bc1x * ic_
+    w[3] = penalty * ny + p3 * (tyx * bc1x + tyy * bc1y) - penalty * bc1y * ic_
+    w[4] = penalty * nx + p3 * (txx * bc2x + txy * bc2y) - penalty * bc2x * ic_
+    w[5] = penalty * ny + p3 * (tyx * bc2x + tyy * bc2y) - penalty * bc2y * ic_
+    txx = nx * gtx - txx
+    txy = nx * gty - txy
+    tyx = ny * gtx - tyx
+    tyy = ny * gty - tyy
+    w[6] = -penalty * nx + p3 * (txx * bt0x + txy * bt0y) - penalty * bt0x * it_
+    w[7] = -penalty * ny + p3 * (tyx * bt0x + tyy * bt0y) - penalty * bt0y * it_
+    w[8] = -penalty * nx + p3 * (txx * bt1x + txy * bt1y) - penalty * bt1x * it_
+    w[9] = -penalty * ny + p3 * (tyx * bt1x + tyy * bt1y) - penalty * bt1y * it_
+    w[10] = -penalty * nx + p3 * (txx * bt2x + txy * bt2y) - penalty * bt2x * it_
+    w[11] = -penalty * ny + p3 * (tyx * bt2x + tyy * bt2y) - penalty * bt2y * it_
+    e = penalty * (ic_ + it_)
+    gx = mx6 / (3.0 * area2)    # int_D x dA / area = (mx6 / 6) / (area2 / 2)
+    gy = my6 / (3.0 * area2)
+    return (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
 
 
 @njit(cache=True, error_model="numpy")
@@ -379,131 +497,186 @@ def tangential_law(ft, du, kt, cap):
 
 
 # ----------------------------------------------------------------------------- pair loop
-@njit(cache=True, error_model="numpy")
-def _load_pair(x, i, j, pts):
-    """Corners of triangles i (c) and j (t) into ``pts`` relative to c's centroid; returns it."""
-    ox = (x[3 * i, 0] + x[3 * i + 1, 0] + x[3 * i + 2, 0]) / 3.0
-    oy = (x[3 * i, 1] + x[3 * i + 1, 1] + x[3 * i + 2, 1]) / 3.0
-    for k in range(3):
-        pts[2 * k] = x[3 * i + k, 0] - ox
-        pts[2 * k + 1] = x[3 * i + k, 1] - oy
-        pts[6 + 2 * k] = x[3 * j + k, 0] - ox
-        pts[7 + 2 * k] = x[3 * j + k, 1] - oy
-    return ox, oy
-
-
-@njit(cache=True, error_model="numpy")
-def _bary_at(x, t, px, py):
-    """Barycentric coordinates of the point (px, py) in triangle t of ``x``."""
-    x0, y0 = x[3 * t, 0], x[3 * t, 1]
-    x1, y1 = x[3 * t + 1, 0], x[3 * t + 1, 1]
-    x2, y2 = x[3 * t + 2, 0], x[3 * t + 2, 1]
-    inv = 1.0 / ((x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0))
-    l1 = ((px - x0) * (y2 - y0) - (py - y0) * (x2 - x0)) * inv
-    l2 = ((x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)) * inv
-    return 1.0 - l1 - l2, l1, l2
-
-
-@njit(cache=True, error_model="numpy")
-def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force, touching):
-    """The pair loop of :func:`pair_forces` over ``q in [lo, hi)``; returns the four energy sums."""
-    pts = np.empty(12)
-    scratch = np.empty(N_SCRATCH)
-    poly = np.empty((2, MAX_POLY, N_COL))
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching, f,
+                w, iw, pool):
+    """The pair loop of :func:`pair_forces` over ``q in [lo, hi)`` (``lo`` and ``hi`` at changes of
+    ``pair_i``): adds the contactors' forces into ``f``, stores the targets' in ``f_t``; returns
+    the four energy sums."""
     c_en = 0.0
     c_et = 0.0
     c_wf = 0.0
     c_wd = 0.0
+    cur = -1
+    s0x = 0.0
+    s0y = 0.0
+    s1x = 0.0
+    s1y = 0.0
+    s2x = 0.0
+    s2y = 0.0
     for q in range(lo, hi):
         i = pair_i[q]
+        if i != cur:
+            # flush the forces summed on the previous contactor (this chunk owns it)
+            if cur >= 0:
+                f[3 * cur, 0] += s0x
+                f[3 * cur, 1] += s0y
+                f[3 * cur + 1, 0] += s1x
+                f[3 * cur + 1, 1] += s1y
+                f[3 * cur + 2, 0] += s2x
+                f[3 * cur + 2, 1] += s2y
+            cur = i
+            s0x = 0.0
+            s0y = 0.0
+            s1x = 0.0
+            s1y = 0.0
+            s2x = 0.0
+            s2y = 0.0
         j = pair_j[q]
-        ox, oy = _load_pair(x, i, j, pts)
-        e = pair_normal(pts, penalty, pair_force, q, scratch, poly)
-        if pair_force[q, 12] <= 0.0:
-            touching[q] = 0
-            for r in range(4):
-                spring[q, r] = 0.0
+        c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
+        hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                                t0x, t0y, t1x, t1y, t2x, t2y)
+        area = 0.0
+        if hit:
+            (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
+             bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y,
+                                                            t2x, t2y, u00, u01, u02, u10, u11, u12, u20, u21,
+                                                            u22, penalty, w, iw, pool)
+        if not area > 0.0:
+            if touching[q]:   # it separated: drop its history (untouched pairs have none)
+                touching[q] = 0
+                for r in range(4):
+                    spring[q, r] = 0.0
             continue
         touching[q] = 1
         c_en += e
-        pair_force[q, 13] += ox
-        pair_force[q, 14] += oy
-        fx = pair_force[q, 0] + pair_force[q, 2] + pair_force[q, 4]
-        fy = pair_force[q, 1] + pair_force[q, 3] + pair_force[q, 5]
+        fx = w[0] + w[2] + w[4]
+        fy = w[1] + w[3] + w[5]
         fn = np.sqrt(fx * fx + fy * fy)
+        gfx = 0.0
+        gfy = 0.0
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
         if fn <= 0.0 or (mu[q] <= 0.0 and damp[q] <= 0.0):
             for r in range(4):
                 spring[q, r] = 0.0
-            continue
-        nx = fx / fn
-        ny = fy / fn
-        px, py = pair_force[q, 13], pair_force[q, 14]
-        a0, a1, a2 = _bary_at(x, i, px, py)
-        b0, b1, b2 = _bary_at(x, j, px, py)
-        vrx = (a0 * v[3 * i, 0] + a1 * v[3 * i + 1, 0] + a2 * v[3 * i + 2, 0]
-               - b0 * v[3 * j, 0] - b1 * v[3 * j + 1, 0] - b2 * v[3 * j + 2, 0])
-        vry = (a0 * v[3 * i, 1] + a1 * v[3 * i + 1, 1] + a2 * v[3 * i + 2, 1]
-               - b0 * v[3 * j, 1] - b1 * v[3 * j + 1, 1] - b2 * v[3 * j + 2, 1])
-        # secant normal stiffness of this pair now, k = F_n^2 / (2E) [Pa]: exact for a flat
-        # overlap (E = k d^2 / 2), 3/4 of the tangent one for a corner; vanishes with the overlap
-        k_sec = fn * fn / (2.0 * e) if e > 0.0 else 0.0
-        gx = 0.0
-        gy = 0.0
-        if mu[q] > 0.0 and k_sec > 0.0:
-            tx = -ny
-            ty = nx
-            sx, sy = spring[q, 0], spring[q, 1]
-            smag = np.sqrt(sx * sx + sy * sy)
-            ft = smag if sx * tx + sy * ty >= 0.0 else -smag  # rotate into the new tangent
-            kt = kt_ratio * k_sec
-            ft, wf = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu[q] * fn)
-            spring[q, 0] = ft * tx
-            spring[q, 1] = ft * ty
-            c_et += 0.5 * ft * ft / kt
-            c_wf += wf
-            gx += ft * tx
-            gy += ft * ty
         else:
-            spring[q, 0] = 0.0
-            spring[q, 1] = 0.0
-        if damp[q] > 0.0 and k_sec > 0.0:
-            vn = vrx * nx + vry * ny
-            # leapfrog-consistent dissipation: the work of a force applied at step n is
-            # F_n . (v_{n-1/2} + v_{n+1/2}) dt / 2; the second half of last step's is booked now
-            c_wd -= 0.5 * (spring[q, 2] * vrx + spring[q, 3] * vry) * dt
-            fd = max(-damp[q] * np.sqrt(k_sec) * vn, -fn)  # never pull beyond the elastic push
-            c_wd -= 0.5 * fd * vn * dt
-            spring[q, 2] = fd * nx
-            spring[q, 3] = fd * ny
-            gx += fd * nx
-            gy += fd * ny
-        else:
-            spring[q, 2] = 0.0
-            spring[q, 3] = 0.0
-        pair_force[q, 0] += a0 * gx
-        pair_force[q, 1] += a0 * gy
-        pair_force[q, 2] += a1 * gx
-        pair_force[q, 3] += a1 * gy
-        pair_force[q, 4] += a2 * gx
-        pair_force[q, 5] += a2 * gy
-        pair_force[q, 6] -= b0 * gx
-        pair_force[q, 7] -= b0 * gy
-        pair_force[q, 8] -= b1 * gx
-        pair_force[q, 9] -= b1 * gy
-        pair_force[q, 10] -= b2 * gx
-        pair_force[q, 11] -= b2 * gy
+            nx = fx / fn
+            ny = fy / fn
+            # barycentrics of the overlap centroid in c and in t (lambda = 1/3 + b . (p - G))
+            a1 = 1.0 / 3.0 + bc1x * gx + bc1y * gy
+            a2 = 1.0 / 3.0 + bc2x * gx + bc2y * gy
+            a0 = 1.0 - a1 - a2
+            b1 = 1.0 / 3.0 + bt1x * (gx - gtx) + bt1y * (gy - gty)
+            b2 = 1.0 / 3.0 + bt2x * (gx - gtx) + bt2y * (gy - gty)
+            b0 = 1.0 - b1 - b2
+            ix = 3 * i
+            jx = 3 * j
+            vrx = (a0 * v[ix, 0] + a1 * v[ix + 1, 0] + a2 * v[ix + 2, 0]
+                   - b0 * v[jx, 0] - b1 * v[jx + 1, 0] - b2 * v[jx + 2, 0])
+            vry = (a0 * v[ix, 1] + a1 * v[ix + 1, 1] + a2 * v[ix + 2, 1]
+                   - b0 * v[jx, 1] - b1 * v[jx + 1, 1] - b2 * v[jx + 2, 1])
+            # secant normal stiffness of this pair now, k = F_n^2 / (2E) [Pa]: exact for a flat
+            # overlap (E = k d^2 / 2), 3/4 of the tangent one for a corner; vanishes with the overlap
+            k_sec = fn * fn / (2.0 * e) if e > 0.0 else 0.0
+            if mu[q] > 0.0 and k_sec > 0.0:
+                tx = -ny
+                ty = nx
+                sx = spring[q, 0]
+                sy = spring[q, 1]
+                smag = np.sqrt(sx * sx + sy * sy)
+                ft = smag if sx * tx + sy * ty >= 0.0 else -smag  # rotate into the new tangent
+                kt = kt_ratio * k_sec
+                ft, wf = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu[q] * fn)
+                spring[q, 0] = ft * tx
+                spring[q, 1] = ft * ty
+                c_et += 0.5 * ft * ft / kt
+                c_wf += wf
+                gfx += ft * tx
+                gfy += ft * ty
+            else:
+                spring[q, 0] = 0.0
+                spring[q, 1] = 0.0
+            if damp[q] > 0.0 and k_sec > 0.0:
+                vn = vrx * nx + vry * ny
+                # leapfrog-consistent dissipation: the work of a force applied at step n is
+                # F_n . (v_{n-1/2} + v_{n+1/2}) dt / 2; the second half of last step's is booked now
+                c_wd -= 0.5 * (spring[q, 2] * vrx + spring[q, 3] * vry) * dt
+                fd = max(-damp[q] * np.sqrt(k_sec) * vn, -fn)  # never pull beyond the elastic push
+                c_wd -= 0.5 * fd * vn * dt
+                spring[q, 2] = fd * nx
+                spring[q, 3] = fd * ny
+                gfx += fd * nx
+                gfy += fd * ny
+            else:
+                spring[q, 2] = 0.0
+                spring[q, 3] = 0.0
+        # friction and damping act at the overlap centroid, equal and opposite
+        s0x += w[0] + a0 * gfx
+        s0y += w[1] + a0 * gfy
+        s1x += w[2] + a1 * gfx
+        s1y += w[3] + a1 * gfy
+        s2x += w[4] + a2 * gfx
+        s2y += w[5] + a2 * gfy
+        f_t[q, 0] = w[6] - b0 * gfx
+        f_t[q, 1] = w[7] - b0 * gfy
+        f_t[q, 2] = w[8] - b1 * gfx
+        f_t[q, 3] = w[9] - b1 * gfy
+        f_t[q, 4] = w[10] - b2 * gfx
+        f_t[q, 5] = w[11] - b2 * gfy
+    if cur >= 0:
+        f[3 * cur, 0] += s0x
+        f[3 * cur, 1] += s0y
+        f[3 * cur + 1, 0] += s1x
+        f[3 * cur + 1, 1] += s1y
+        f[3 * cur + 2, 0] += s2x
+        f[3 * cur + 2, 1] += s2y
     return c_en, c_et, c_wf, c_wd
 
 
+@njit(cache=True, error_model="numpy")
+def _gcd(a, b):
+    while b:
+        a, b = b, a % b
+    return a
+
+
+@njit(cache=True, error_model="numpy")
+def chunk_bounds(pair_i, n_chunks):
+    """(n_chunks + 1,) boundaries of the pair loop's chunks: about equal pair counts, each moved
+    forward to the next change of ``pair_i`` (a chunk owns all pairs of its contactors)."""
+    n = pair_i.shape[0]
+    bounds = np.empty(n_chunks + 1, np.int64)
+    bounds[0] = 0
+    for ch in range(1, n_chunks):
+        b = max(ch * n // n_chunks, bounds[ch - 1])
+        while 0 < b < n and pair_i[b] == pair_i[b - 1]:
+            b += 1
+        bounds[ch] = b
+    bounds[n_chunks] = n
+    return bounds
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
-def _pair_chunks_parallel(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force, touching,
-                          n_chunks):
-    """Parallel driver of :func:`pair_forces`: (n_chunks, 4) energy sums per chunk of pairs."""
-    n = pair_i.shape[0]
+def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching,
+                          f, stride):
+    """Parallel driver of :func:`pair_forces`: (n_chunks, 4) energy sums per chunk of pairs.
+    Iteration ``it`` runs chunk ``it * stride mod n_chunks`` (``stride`` coprime, about 0.618
+    n_chunks), so each thread's contiguous share of iterations is spread over the whole pair
+    list: balanced when the overlapping pairs cluster (the bottom of a pile)."""
+    n_chunks = bounds.shape[0] - 1
     sums = np.zeros((n_chunks, 4))
-    for ch in prange(n_chunks):
-        a, b, c, d = _pair_range(ch * n // n_chunks, (ch + 1) * n // n_chunks, x, v, pair_i, pair_j, penalty,
-                                 mu, kt_ratio, damp, dt, spring, pair_force, touching)
+    for it in prange(n_chunks):
+        ch = (it * stride) % n_chunks
+        w = np.empty(N_WORK)
+        iw = np.empty(N_IWORK, np.int64)
+        pool = np.empty((MAX_VERT, N_COL))
+        a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp,
+                                 dt, spring, f_t, touching, f, w, iw, pool)
         sums[ch, 0] = a
         sums[ch, 1] = b
         sums[ch, 2] = c
@@ -512,31 +685,18 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt,
 
 
 @njit(cache=True, error_model="numpy")
-def _pair_chunks_serial(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force, touching,
-                        n_chunks):
-    """Serial twin of :func:`_pair_chunks_parallel` (same chunks, so the same bits)."""
-    n = pair_i.shape[0]
-    sums = np.zeros((n_chunks, 4))
-    for ch in range(n_chunks):
-        a, b, c, d = _pair_range(ch * n // n_chunks, (ch + 1) * n // n_chunks, x, v, pair_i, pair_j, penalty,
-                                 mu, kt_ratio, damp, dt, spring, pair_force, touching)
-        sums[ch, 0] = a
-        sums[ch, 1] = b
-        sums[ch, 2] = c
-        sums[ch, 3] = d
-    return sums
-
-
-@njit(cache=True, error_model="numpy")
-def pair_forces(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force, touching):
-    """Contact forces of all candidate pairs, stored per pair (race-free; gather afterwards).
+def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching, f):
+    """Contact forces of all candidate pairs: contactors' added into ``f``, targets' stored per pair.
 
     Parameters
     ----------
     x, v : (n_nodes, 2) float64
         Positions [m] and velocities [m/s] of the exploded nodes.
     pair_i, pair_j : (n_pairs,) int64
-        Triangles of each candidate pair (``i < j``; ``i`` plays contactor ``c``).
+        Triangles of each candidate pair, sorted by ``pair_i`` (``i`` plays contactor ``c``).
+    bounds : (n_chunks + 1,) int64
+        Chunks of the pair loop (:func:`chunk_bounds`); fixed by the pair list, so the sums
+        (and forces) are bitwise independent of the thread count.
     penalty : float
         Normal penalty ``p`` [Pa].
     mu : (n_pairs,) float64
@@ -555,10 +715,15 @@ def pair_forces(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, p
         Per-pair history, updated in place: tangential (friction) force vector on ``c`` [N/m]
         (the slip history), then the normal damping force vector of the last step [N/m] (to
         book its dissipation time-centred).
-    pair_force : (n_pairs, N_OUT) float64
-        Overwritten: row as in :func:`pair_normal` (forces include friction and damping).
+    f_t : (n_pairs, 6) float64
+        Overwritten where the pair overlaps: forces on t's corners (friction and damping
+        included) [N/m]; gather them with :func:`gather_forces`.
     touching : (n_pairs,) uint8
-        Overwritten: 1 where the pair overlaps (its forces need gathering).
+        Updated: 1 where the pair overlaps (its ``f_t`` row needs gathering). On entry 0 must
+        mean that the pair's ``spring`` row is zero (the loop reads neither for pairs that
+        stay apart).
+    f : (n_nodes, 2) float64
+        Forces on c's corners are added here [N/m].
 
     Returns
     -------
@@ -566,55 +731,77 @@ def pair_forces(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, p
         Normal contact energy and tangential spring energy ``|F_t|^2 / (2 k_t)`` now; frictional
         and damping work dissipated during this step.
     """
-    n = pair_i.shape[0]
-    # chunking depends on n only, so sums (and forces) are bitwise independent of the thread count
-    n_chunks = min(1024, max(1, n // 128))
-    if n >= PARALLEL_MIN_PAIRS:
-        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force,
-                                     touching, n_chunks)
+    n_chunks = bounds.shape[0] - 1
+    if pair_i.shape[0] >= PARALLEL_MIN_PAIRS:
+        stride = max(1, int(0.618 * n_chunks))
+        while _gcd(stride, n_chunks) != 1:
+            stride += 1
+        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t,
+                                     touching, f, stride)
     else:
-        sums = _pair_chunks_serial(x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, pair_force,
-                                   touching, n_chunks)
+        sums = np.zeros((n_chunks, 4))
+        w = np.empty(N_WORK)
+        iw = np.empty(N_IWORK, np.int64)
+        pool = np.empty((MAX_VERT, N_COL))
+        for ch in range(n_chunks):
+            a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_ratio,
+                                     damp, dt, spring, f_t, touching, f, w, iw, pool)
+            sums[ch, 0] = a
+            sums[ch, 1] = b
+            sums[ch, 2] = c
+            sums[ch, 3] = d
     # sequential sum in chunk order: bitwise the same for any thread count
     e = np.zeros(4)
-    for ch in range(sums.shape[0]):
+    for ch in range(n_chunks):
         for r in range(4):
             e[r] += sums[ch, r]
     return e[0], e[1], e[2], e[3]
 
 
+@njit(cache=True, error_model="numpy")
+def overlap_areas(x, pair_i, pair_j):
+    """(n_pairs,) overlap area of each pair [m^2] (0 when apart or touching)."""
+    n = pair_i.shape[0]
+    out = np.zeros(n)
+    w = np.empty(N_WORK)
+    iw = np.empty(N_IWORK, np.int64)
+    pool = np.empty((MAX_VERT, N_COL))
+    for q in range(n):
+        out[q] = pair_normal(x, pair_i[q], pair_j[q], 1.0, w, iw, pool)[1]
+    return out
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def _gather_one(f, t, r0, r1, inc_code, pair_force, touching):
+def _gather_one(f, t, r0, r1, inc_pair, f_t, touching):
     for r in range(r0, r1):
-        code = inc_code[r]
-        q = code >> 1
+        q = inc_pair[r]
         if touching[q] == 0:
             continue
-        o = 6 * (code & 1)
         for k in range(3):
-            f[3 * t + k, 0] += pair_force[q, o + 2 * k]
-            f[3 * t + k, 1] += pair_force[q, o + 2 * k + 1]
+            f[3 * t + k, 0] += f_t[q, 2 * k]
+            f[3 * t + k, 1] += f_t[q, 2 * k + 1]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _gather_parallel(f, active, inc_ptr, inc_code, pair_force, touching):
+def _gather_parallel(f, active, inc_ptr, inc_pair, f_t, touching):
     for a in prange(active.shape[0]):
-        _gather_one(f, active[a], inc_ptr[a], inc_ptr[a + 1], inc_code, pair_force, touching)
+        _gather_one(f, active[a], inc_ptr[a], inc_ptr[a + 1], inc_pair, f_t, touching)
 
 
 @njit(cache=True, error_model="numpy")
-def gather_forces(f, active, inc_ptr, inc_code, pair_force, touching):
-    """Add stored pair forces to the nodes: ``f[3t+k] += sum over t's pairs`` (race-free).
+def gather_forces(f, active, inc_ptr, inc_pair, f_t, touching):
+    """Add the stored target-side pair forces to the nodes: ``f[3t+k] += sum over the pairs
+    whose target is t`` (race-free: each triangle writes only its own three nodes).
 
-    ``active`` (n_act,) triangle ids; their incident pairs are ``inc_code[inc_ptr[a]:inc_ptr[a+1]]``
-    with ``code = 2 * pair + side`` (side 0: the triangle is the pair's ``c``, 1: its ``t``).
-    Each triangle writes only its own three nodes. Small sets run serially.
+    ``active`` (n_act,) triangle ids; the pairs with target ``active[a]`` are
+    ``inc_pair[inc_ptr[a]:inc_ptr[a+1]]`` (:func:`target_incidence`). Small sets run serially.
     """
-    if inc_code.shape[0] >= 2 * PARALLEL_MIN_PAIRS:
-        _gather_parallel(f, active, inc_ptr, inc_code, pair_force, touching)
+    if inc_pair.shape[0] >= PARALLEL_MIN_PAIRS:
+        _gather_parallel(f, active, inc_ptr, inc_pair, f_t, touching)
     else:
         for a in range(active.shape[0]):
-            _gather_one(f, active[a], inc_ptr[a], inc_ptr[a + 1], inc_code, pair_force, touching)
+            _gather_one(f, active[a], inc_ptr[a], inc_ptr[a + 1], inc_pair, f_t, touching)
+
 
 
 # ----------------------------------------------------------------------------- broad phase
@@ -812,31 +999,28 @@ def grid_pairs(box, active, bond, cell, max_cells):
 
 
 @njit(cache=True, error_model="numpy")
-def pair_incidence(pair_i, pair_j, slot_of_tri, n_active):
-    """CSR of pairs per active triangle: ``code = 2 * pair + side`` (counting sort, O(n))."""
-    n = pair_i.shape[0]
+def target_incidence(pair_j, slot_of_tri, n_active):
+    """CSR of the pairs whose target (second triangle) is each active triangle (counting sort,
+    O(n)): ``inc_pair[inc_ptr[a]:inc_ptr[a+1]]`` in pair order."""
+    n = pair_j.shape[0]
     ptr = np.zeros(n_active + 1, np.int64)
     for q in range(n):
-        ptr[slot_of_tri[pair_i[q]] + 1] += 1
         ptr[slot_of_tri[pair_j[q]] + 1] += 1
     for a in range(n_active):
         ptr[a + 1] += ptr[a]
     fill = ptr[:-1].copy()
-    code = np.empty(2 * n, np.int64)
+    inc = np.empty(n, np.int64)
     for q in range(n):
-        a = slot_of_tri[pair_i[q]]
-        code[fill[a]] = 2 * q
-        fill[a] += 1
         b = slot_of_tri[pair_j[q]]
-        code[fill[b]] = 2 * q + 1
+        inc[fill[b]] = q
         fill[b] += 1
-    return ptr, code
+    return ptr, inc
 
 
 @njit(cache=True, error_model="numpy")
-def carry_history(old_keys, old_hist, new_keys, new_hist):
+def carry_history(old_keys, old_hist, new_keys, new_hist, has_hist):
     """Copy the per-pair history rows of pairs that survive a re-search, zero the new ones
-    (both key lists sorted; one merge pass, O(n))."""
+    (both key lists sorted; one merge pass, O(n)); ``has_hist[q] = 1`` where the row is nonzero."""
     a = 0
     na = old_keys.shape[0]
     nc = new_hist.shape[1]
@@ -844,12 +1028,16 @@ def carry_history(old_keys, old_hist, new_keys, new_hist):
         k = new_keys[q]
         while a < na and old_keys[a] < k:
             a += 1
+        flag = 0
         if a < na and old_keys[a] == k:
             for r in range(nc):
                 new_hist[q, r] = old_hist[a, r]
+                if old_hist[a, r] != 0.0:
+                    flag = 1
         else:
             for r in range(nc):
                 new_hist[q, r] = 0.0
+        has_hist[q] = flag
 
 
 @njit(cache=True, error_model="numpy")
