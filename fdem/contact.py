@@ -159,12 +159,13 @@ class ContactSet:
         Friction angle ``phi`` [deg] in ``[0, 90)``, per triangle; a pair uses
         ``mu = tan(min(phi_i, phi_j))``. 0 switches friction off (the branch is skipped).
     tangential_ratio : float
-        Tangential stiffness of a pair as a fraction of its current secant normal stiffness
-        ``k = F_n^2 / (2 E_pair)`` (``= 3 p L (1/h_c + 1/h_t)`` for a flat overlap of length
-        ``L``). Tangential stiffness then grows with the contact like the normal one, and the
-        elastic pre-slip before sliding, ``mu F_n / k_t``, is ``mu / tangential_ratio`` times the
-        normal penetration: it vanishes as the penalty grows. Default 1; values above 1
-        shorten :meth:`stable_dt`.
+        Tangential stiffness of a pair as a fraction of the normal stiffness of a face-to-face
+        contact, ``k_t = tangential_ratio * 6 p L / h`` with ``L`` the longest edge and ``h``
+        the altitude on it, the smaller of the pair's two triangles. It is constant while the
+        pair exists, so the tangential spring's stored energy matches the work done on it and
+        the ledger closes when the normal force varies under a loaded spring. The elastic
+        pre-slip before sliding, ``mu F_n / k_t``, vanishes as the penalty grows. Default 1;
+        values above 1 shorten :meth:`stable_dt`.
     damping_ratio : float
         Normal viscous damping ratio ``xi >= 0`` of a pair (``c_n = 2 xi sqrt(k m_eff)``, ``k`` the
         pair's current secant stiffness, ``m_eff`` the reduced mass of its two triangles); needs
@@ -221,6 +222,9 @@ class ContactSet:
         edges = np.linalg.norm(x0[np.roll(tri, -1, axis=1)] - x0[tri], axis=2)  # (n_tri, 3)
         self._edge_max = edges.max(axis=1)
         self._altitude = 2.0 * np.abs(topology.triangle_area0) / self._edge_max
+        # Face-to-face normal stiffness of each triangle, 6 p L / h (see stable_dt).
+        self._kt_tri = tangential_ratio * 6.0 * self.penalty * self._edge_max / self._altitude
+        self._kt_pair = np.zeros(0)
         if skin is None:
             skin = 0.3 * float(edges.mean()) if edges.size else 1.0
         skin = float(skin)
@@ -242,7 +246,7 @@ class ContactSet:
         # pair state
         self.pairs = np.zeros((0, 2), np.int64)
         self._keys = np.zeros(0, np.int64)
-        self._history = np.zeros((0, 4))
+        self._history = np.zeros((0, kc.N_HIST))
         self._mu_pair = np.zeros(0)
         self._damp_pair = np.zeros(0)
         self._pair_i = np.zeros(0, np.int64)       # contiguous copies of the pair columns
@@ -259,7 +263,7 @@ class ContactSet:
         # energy ledger [J/m]
         self._e_normal = 0.0
         self._e_tangential = 0.0
-        self._w_friction = 0.0
+        self._w_tangential = 0.0  # work done on the bodies by the tangential contact forces
         self._w_damping = 0.0
 
         if check_overlap:
@@ -348,13 +352,14 @@ class ContactSet:
         pairs = candidate_pairs(x, self._active, self._bond, self.skin, self.cell_size)
         n_tri = self.topology.n_triangles
         keys = pairs[:, 0] * n_tri + pairs[:, 1]
-        history = np.empty((len(pairs), 4))
+        history = np.empty((len(pairs), kc.N_HIST))
         # touching = 1 where a carried pair has history (the pair loop zeroes it if the pair has
         # separated; it reads no history of pairs that stay apart)
         touching = np.empty(len(pairs), np.uint8)
         kc.carry_history(self._keys, self._history, keys, history, touching)
         self.pairs, self._keys, self._history = pairs, keys, history
         self._mu_pair = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
+        self._kt_pair = np.minimum(self._kt_tri[pairs[:, 0]], self._kt_tri[pairs[:, 1]])
         if self.damping_ratio > 0.0:
             mi, mj = self.mass_tri[pairs[:, 0]], self.mass_tri[pairs[:, 1]]
             self._damp_pair = 2.0 * self.damping_ratio * np.sqrt(mi * mj / (mi + mj))
@@ -399,12 +404,12 @@ class ContactSet:
             self._e_tangential = 0.0
             return
         e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
-                                            self._mu_pair, self.tangential_ratio, self._damp_pair, float(dt),
+                                            self._mu_pair, self._kt_pair, self._damp_pair, float(dt),
                                             self._history, self._f_target, self._touching, f)
         kc.gather_forces(f, self._active, self._inc_ptr, self._inc_pair, self._f_target, self._touching)
         self._e_normal = e_n
         self._e_tangential = e_t
-        self._w_friction += w_f
+        self._w_tangential += w_f
         self._w_damping += w_d
 
     def energy_terms(self) -> dict[str, float]:
@@ -416,7 +421,7 @@ class ContactSet:
         """
         return {
             "contact_elastic": float(self._e_normal + self._e_tangential),
-            "friction": float(self._w_friction),
+            "friction": float(-self._w_tangential - self._e_tangential),
             "contact_damping": float(self._w_damping),
         }
 

@@ -89,6 +89,9 @@ MAX_VERT = 16
 """Vertex pool of the overlap polygon: 3 corners + at most 2 + 4 + 6 new ones (two per pass for
 a convex polygon; the bound also covers round-off on degenerate ones)."""
 N_COL = 8
+N_HIST = 10
+"""Per-pair history row: tangential spring force (x, y) [N/m], damping force (x, y) [N/m], and
+the barycentric weights of the point they were applied at, in c (3) and in t (3)."""
 """Columns of a polygon vertex: x, y (frame at c's centroid), t's three, c's three barycentrics."""
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 """Fast-math flags of the narrow phase (no ``nnan``/``ninf``: NaNs still propagate). The
@@ -498,7 +501,7 @@ def tangential_law(ft, du, kt, cap):
 
 # ----------------------------------------------------------------------------- pair loop
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
-def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching, f,
+def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, f,
                 w, iw, pool):
     """The pair loop of :func:`pair_forces` over ``q in [lo, hi)`` (``lo`` and ``hi`` at changes of
     ``pair_i``): adds the contactors' forces into ``f``, stores the targets' in ``f_t``; returns
@@ -545,7 +548,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, s
         if not area > 0.0:
             if touching[q]:   # it separated: drop its history (untouched pairs have none)
                 touching[q] = 0
-                for r in range(4):
+                for r in range(N_HIST):
                     spring[q, r] = 0.0
             continue
         touching[q] = 1
@@ -580,6 +583,20 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, s
                    - b0 * v[jx, 0] - b1 * v[jx + 1, 0] - b2 * v[jx + 2, 0])
             vry = (a0 * v[ix, 1] + a1 * v[ix + 1, 1] + a2 * v[ix + 2, 1]
                    - b0 * v[jx, 1] - b1 * v[jx + 1, 1] - b2 * v[jx + 2, 1])
+            # relative velocity at last step's application point (its barycentric weights are
+            # kept with the history): the second half-step work of last step's forces
+            p0, p1, p2 = spring[q, 4], spring[q, 5], spring[q, 6]
+            r0, r1, r2 = spring[q, 7], spring[q, 8], spring[q, 9]
+            wpx = (p0 * v[ix, 0] + p1 * v[ix + 1, 0] + p2 * v[ix + 2, 0]
+                   - r0 * v[jx, 0] - r1 * v[jx + 1, 0] - r2 * v[jx + 2, 0])
+            wpy = (p0 * v[ix, 1] + p1 * v[ix + 1, 1] + p2 * v[ix + 2, 1]
+                   - r0 * v[jx, 1] - r1 * v[jx + 1, 1] - r2 * v[jx + 2, 1])
+            spring[q, 4] = a0
+            spring[q, 5] = a1
+            spring[q, 6] = a2
+            spring[q, 7] = b0
+            spring[q, 8] = b1
+            spring[q, 9] = b2
             # secant normal stiffness of this pair now, k = F_n^2 / (2E) [Pa]: exact for a flat
             # overlap (E = k d^2 / 2), 3/4 of the tangent one for a corner; vanishes with the overlap
             k_sec = fn * fn / (2.0 * e) if e > 0.0 else 0.0
@@ -590,12 +607,18 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, s
                 sy = spring[q, 1]
                 smag = np.sqrt(sx * sx + sy * sy)
                 ft = smag if sx * tx + sy * ty >= 0.0 else -smag  # rotate into the new tangent
-                kt = kt_ratio * k_sec
-                ft, wf = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu[q] * fn)
+                kt = kt_pair[q]
+                # Work of the tangential force on the pair, leapfrog-consistent like the ledger:
+                # last step's force over the second half-step, this step's over the first; the
+                # friction dissipation is then minus this work minus the spring energy (booking
+                # mu F_n times the slip of v_{n-1/2} instead is a first-order error in dt that
+                # accumulates while a sticking contact vibrates).
+                c_wf += 0.5 * (sx * wpx + sy * wpy) * dt
+                ft, _ = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu[q] * fn)
                 spring[q, 0] = ft * tx
                 spring[q, 1] = ft * ty
+                c_wf += 0.5 * ft * (tx * vrx + ty * vry) * dt
                 c_et += 0.5 * ft * ft / kt
-                c_wf += wf
                 gfx += ft * tx
                 gfy += ft * ty
             else:
@@ -605,7 +628,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp, dt, s
                 vn = vrx * nx + vry * ny
                 # leapfrog-consistent dissipation: the work of a force applied at step n is
                 # F_n . (v_{n-1/2} + v_{n+1/2}) dt / 2; the second half of last step's is booked now
-                c_wd -= 0.5 * (spring[q, 2] * vrx + spring[q, 3] * vry) * dt
+                c_wd -= 0.5 * (spring[q, 2] * wpx + spring[q, 3] * wpy) * dt
                 fd = max(-damp[q] * np.sqrt(k_sec) * vn, -fn)  # never pull beyond the elastic push
                 c_wd -= 0.5 * fd * vn * dt
                 spring[q, 2] = fd * nx
@@ -662,7 +685,7 @@ def chunk_bounds(pair_i, n_chunks):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching,
+def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching,
                           f, stride):
     """Parallel driver of :func:`pair_forces`: (n_chunks, 4) energy sums per chunk of pairs.
     Iteration ``it`` runs chunk ``it * stride mod n_chunks`` (``stride`` coprime, about 0.618
@@ -675,7 +698,7 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, d
         w = np.empty(N_WORK)
         iw = np.empty(N_IWORK, np.int64)
         pool = np.empty((MAX_VERT, N_COL))
-        a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_ratio, damp,
+        a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair, damp,
                                  dt, spring, f_t, touching, f, w, iw, pool)
         sums[ch, 0] = a
         sums[ch, 1] = b
@@ -685,7 +708,7 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, d
 
 
 @njit(cache=True, error_model="numpy")
-def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t, touching, f):
+def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, f):
     """Contact forces of all candidate pairs: contactors' added into ``f``, targets' stored per pair.
 
     Parameters
@@ -701,10 +724,11 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, s
         Normal penalty ``p`` [Pa].
     mu : (n_pairs,) float64
         Coulomb coefficient ``tan(phi)`` of each pair; 0 skips the friction branch.
-    kt_ratio : float
-        Tangential stiffness of a pair as a fraction of its current secant normal stiffness
-        ``k = F_n^2 / (2 E)`` [-] (so the elastic pre-slip ``mu F_n / k_t`` is ``mu / kt_ratio``
-        times the normal penetration, and vanishes with it as ``p`` grows).
+    kt_pair : (n_pairs,) float64
+        Tangential stiffness of each pair [N/m per m], constant while the pair exists, so the
+        tangential spring stores ``f_t^2 / (2 k_t)`` consistently with the work done on it (a
+        stiffness that followed the normal force would create or destroy energy whenever the
+        normal force changed while the spring was loaded).
     damp : (n_pairs,) float64
         ``2 xi sqrt(m_eff)`` of each pair [sqrt(kg/m)]: the normal viscous coefficient is
         ``c_n = damp sqrt(k)`` with the same secant stiffness ``k`` (so a sliver overlap is
@@ -736,7 +760,7 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, s
         stride = max(1, int(0.618 * n_chunks))
         while _gcd(stride, n_chunks) != 1:
             stride += 1
-        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, spring, f_t,
+        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t,
                                      touching, f, stride)
     else:
         sums = np.zeros((n_chunks, 4))
@@ -744,7 +768,7 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_ratio, damp, dt, s
         iw = np.empty(N_IWORK, np.int64)
         pool = np.empty((MAX_VERT, N_COL))
         for ch in range(n_chunks):
-            a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_ratio,
+            a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair,
                                      damp, dt, spring, f_t, touching, f, w, iw, pool)
             sums[ch, 0] = a
             sums[ch, 1] = b
