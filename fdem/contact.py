@@ -146,6 +146,11 @@ def _mu_from(friction_angle, mu, n: int, what: str) -> np.ndarray | None:
 
 
 # ----------------------------------------------------------------------------- the force provider
+INELASTIC_CHECK_EVERY = 16
+"""Steps between looks at which crack elements have started to soften or slide (a count of
+the crack set's status flags; a few steps of delay let no overlap grow that matters)."""
+
+
 class ContactSet:
     """Triangle-triangle contact of an exploded mesh, called by the solver every step.
 
@@ -240,6 +245,8 @@ class ContactSet:
         self._bond = _bond_table(topology, ~self._broken)
         self._is_contactor = np.zeros(n_tri, dtype=bool)
         self._is_contactor[topology.boundary_triangle] = True
+        self._any_extra_contactor = False
+        self._n_inelastic_seen = 0
         self._n_bodies = int(np.unique(topology.triangle_body).size)
         self._refresh_active()
 
@@ -274,6 +281,7 @@ class ContactSet:
             already = np.flatnonzero(cracks.broken)
             if already.size:
                 self.activate_cracks(already, mu=cracks.residual_friction[already])
+            self._watch_inelastic()
 
     # ------------------------------------------------------------------ state
     @property
@@ -293,8 +301,9 @@ class ContactSet:
 
     @property
     def dormant(self) -> bool:
-        """True while there is nothing that can touch: one body and no broken crack element."""
-        return self._n_bodies <= 1 and not self._any_broken
+        """True while there is nothing that can touch: one body, no broken crack element and no
+        contactor beyond the external boundary."""
+        return self._n_bodies <= 1 and not self._any_broken and not self._any_extra_contactor
 
     def _refresh_active(self) -> None:
         self._active = np.flatnonzero(self._is_contactor).astype(np.int64)
@@ -328,6 +337,30 @@ class ContactSet:
         self._is_contactor[tri.ravel()] = True
         self._refresh_active()
         self._needs_search = True
+
+    def add_contactors(self, triangles) -> None:
+        """Let ``triangles`` touch anything they are not bonded to (their bonds are kept)."""
+        tris = np.unique(np.asarray(triangles, dtype=np.int64))
+        new = tris[~self._is_contactor[tris]]
+        if new.size == 0:
+            return
+        self._is_contactor[new] = True
+        self._any_extra_contactor = True
+        self._refresh_active()
+        self._needs_search = True
+
+    def _watch_inelastic(self) -> None:
+        """Make the triangles of crack elements that have started to soften or slide contactors.
+
+        A sliding or opening element lets the vertex neighbours of its two triangles, which no
+        crack element ties, pass into each other; only contact resists that. Waiting until the
+        element breaks would let the overlap grow unresisted (by the element's slip, up to
+        centimetres) and then push it apart at once, creating energy.
+        """
+        n = self.cracks.n_inelastic()
+        if n != self._n_inelastic_seen:
+            self._n_inelastic_seen = n
+            self.add_contactors(self.topology.crack_triangles[self.cracks.inelastic()].ravel())
 
     def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
         """Change the friction of ``triangles`` (default all), as ``friction_angle`` [deg] or
@@ -394,6 +427,8 @@ class ContactSet:
             ids = self.cracks.newly_broken
             if ids.size:
                 self.activate_cracks(ids, mu=self.cracks.residual_friction[ids])
+            if step % INELASTIC_CHECK_EVERY == 0:
+                self._watch_inelastic()
         if self.dormant:
             return
         if v is None:  # no velocities: no slip or damping increments this step
