@@ -65,6 +65,41 @@ def damped_velocity(u, force, mass, inv_mass, dt, alpha, c_keep, c_div, local):
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
+def constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt, flags, v_prescribed):
+    """Apply node ``i``'s prescribed velocities to its new velocity ``(nx, ny)``, then write
+    ``v[i]`` and ``x[i] = (px, py) + dt v``.
+
+    A prescribed component takes its value and drops its damping force; the support supplies the
+    reaction ``r = m (v_p - u)/dt - f`` whose work is booked in half-steps, ``dt/2 r u`` (early)
+    and ``dt/2 r v_p`` (late). Returns ``(nx, ny, gdx, gdy, reaction_early, reaction_late)``.
+    """
+    h = 0.5 * dt
+    re = 0.0
+    rl = 0.0
+    flag = flags[i]
+    if flag != 0:
+        if flag & 1:
+            vp = v_prescribed[i, 0]
+            r = mass * (vp - ux) / dt - fx
+            nx = vp
+            gdx = 0.0
+            re += h * r * ux
+            rl += h * r * vp
+        if flag & 2:
+            vp = v_prescribed[i, 1]
+            r = mass * (vp - uy) / dt - fy
+            ny = vp
+            gdy = 0.0
+            re += h * r * uy
+            rl += h * r * vp
+    v[i, 0] = nx
+    v[i, 1] = ny
+    x[i, 0] = px + dt * nx
+    x[i, 1] = py + dt * ny
+    return nx, ny, gdx, gdy, re, rl
+
+
+@njit(fastmath=FASTMATH, cache=True, inline="always")
 def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
                  f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger):
     """Central-difference update of node ``i`` given the force ``(fx, fy)`` of its triangle(s).
@@ -105,28 +140,8 @@ def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_d
         ny = uy + dt * inv_mass * fy
         gdx = 0.0
         gdy = 0.0
-    re = 0.0
-    rl = 0.0
-    flag = flags[i]
-    if flag != 0:
-        if flag & 1:
-            vp = v_prescribed[i, 0]
-            r = mass * (vp - ux) / dt - fx
-            nx = vp
-            gdx = 0.0
-            re += h * r * ux
-            rl += h * r * vp
-        if flag & 2:
-            vp = v_prescribed[i, 1]
-            r = mass * (vp - uy) / dt - fy
-            ny = vp
-            gdy = 0.0
-            re += h * r * uy
-            rl += h * r * vp
-    v[i, 0] = nx
-    v[i, 1] = ny
-    x[i, 0] = px + dt * nx
-    x[i, 1] = py + dt * ny
+    nx, ny, gdx, gdy, re, rl = constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
+                                                  flags, v_prescribed)
     if damped:
         de = -h * (gdx * ux + gdy * uy)
         dl = -h * (gdx * nx + gdy * ny)
@@ -254,28 +269,8 @@ def advance_node_elastic(x, v, i, px, py, fx, fy, mass, inv_mass, gx, gy, dt, da
         ny = uy + dt * inv_mass * fy
         gdx = 0.0
         gdy = 0.0
-    re = 0.0
-    rl = 0.0
-    flag = flags[i]
-    if flag != 0:
-        if flag & 1:
-            vp = v_prescribed[i, 0]
-            r = mass * (vp - ux) / dt - fx
-            nx = vp
-            gdx = 0.0
-            re += h * r * ux
-            rl += h * r * vp
-        if flag & 2:
-            vp = v_prescribed[i, 1]
-            r = mass * (vp - uy) / dt - fy
-            ny = vp
-            gdy = 0.0
-            re += h * r * uy
-            rl += h * r * vp
-    v[i, 0] = nx
-    v[i, 1] = ny
-    x[i, 0] = px + dt * nx
-    x[i, 1] = py + dt * ny
+    nx, ny, gdx, gdy, re, rl = constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
+                                                  flags, v_prescribed)
     return re, rl, nx, ny, ux, uy, -h * (gdx * ux + gdy * uy), -h * (gdx * nx + gdy * ny)
 
 
