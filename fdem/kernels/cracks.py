@@ -252,6 +252,29 @@ def element_update(c, x, nodes, const, status, state, diss):
     return broke, F0x, F0y, F1x, F1y
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def update_and_scatter(c, x, f, nodes, const, status, state, diss, broke_flag):
+    """Update element ``c`` and add its forces to its four nodes (``+F_i`` on the A node of end
+    ``i``, ``-F_i`` on the B node). Returns 1 if it broke (and sets ``broke_flag[c]``), else 0."""
+    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+    i0 = nodes[c, 0]
+    i1 = nodes[c, 1]
+    i2 = nodes[c, 2]
+    i3 = nodes[c, 3]
+    f[i0, 0] += F0x
+    f[i0, 1] += F0y
+    f[i3, 0] -= F0x
+    f[i3, 1] -= F0y
+    f[i1, 0] += F1x
+    f[i1, 1] += F1y
+    f[i2, 0] -= F1x
+    f[i2, 1] -= F1y
+    if broke:
+        broke_flag[c] = 1
+        return 1
+    return 0
+
+
 @njit(cache=True, parallel=True, fastmath=True)
 def crack_forces_coloured(x, f, nodes, const, status, state, diss, active, colour_ptr, broke_flag):
     """Add crack forces into ``f`` (n_nodes, 2) [N/m], colour by colour.
@@ -264,23 +287,7 @@ def crack_forces_coloured(x, f, nodes, const, status, state, diss, active, colou
     nb = 0
     for k in range(colour_ptr.shape[0] - 1):
         for j in prange(colour_ptr[k], colour_ptr[k + 1]):
-            c = active[j]
-            broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
-            i0 = nodes[c, 0]
-            i1 = nodes[c, 1]
-            i2 = nodes[c, 2]
-            i3 = nodes[c, 3]
-            f[i0, 0] += F0x
-            f[i0, 1] += F0y
-            f[i3, 0] -= F0x
-            f[i3, 1] -= F0y
-            f[i1, 0] += F1x
-            f[i1, 1] += F1y
-            f[i2, 0] -= F1x
-            f[i2, 1] -= F1y
-            if broke:
-                broke_flag[c] = 1
-                nb += 1
+            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, broke_flag)
     return nb
 
 
@@ -290,23 +297,7 @@ def crack_forces_serial(x, f, nodes, const, status, state, diss, active, broke_f
     overhead; any element order is race-free on one thread)."""
     nb = 0
     for j in range(active.shape[0]):
-        c = active[j]
-        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
-        i0 = nodes[c, 0]
-        i1 = nodes[c, 1]
-        i2 = nodes[c, 2]
-        i3 = nodes[c, 3]
-        f[i0, 0] += F0x
-        f[i0, 1] += F0y
-        f[i3, 0] -= F0x
-        f[i3, 1] -= F0y
-        f[i1, 0] += F1x
-        f[i1, 1] += F1y
-        f[i2, 0] -= F1x
-        f[i2, 1] -= F1y
-        if broke:
-            broke_flag[c] = 1
-            nb += 1
+        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, broke_flag)
     return nb
 
 
