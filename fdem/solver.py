@@ -40,8 +40,7 @@ If a provider has no ``energy_terms``, its energy is taken as ``-interaction_wor
 from __future__ import annotations
 
 import math
-import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
 

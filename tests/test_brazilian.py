@@ -3,7 +3,6 @@ strength within 15 %, and the first crack opens near the centre on the loaded di
 import importlib.util
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "brazilian_disc.py"

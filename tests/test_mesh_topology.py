@@ -1,5 +1,4 @@
 """Gmsh meshing conforming to the DFN, quality report, .msh round trip, and the exploded topology."""
-import math
 import re
 import warnings
 from collections import Counter
@@ -8,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.geometry import BrickSet, IntermittentSet, Model, PersistentSet, SegmentSet, rectangle, simple_slope
+from fdem.geometry import BrickSet, IntermittentSet, Model, SegmentSet, rectangle, simple_slope
 from fdem.mesh import Mesh, structured_rectangle
 from fdem.meshing import mesh_model, quality_report
 from fdem.topology import build_topology, check_triangles

@@ -3,45 +3,31 @@
 Meshes of about 1e5 and 1e6 triangles (``structured_rectangle``; about 1.5 crack elements per
 triangle), the four-slope property sets (intact rock), nodes perturbed elastically so every
 element evaluates the full law. Both race-free schemes are timed, on 1 and 2 threads
-(``numba.set_num_threads``). Prints a table and writes ``docs/benchmarks/cracks.json`` as
-records ``{what, mesh_triangles, crack_elements, threads, scheme, value, unit, machine,
-load_average_1min}`` (the load shows how busy the machine was).
+(``numba.set_num_threads``). Prints and writes ``docs/benchmarks/cracks.json`` as records (what, mesh size, threads,
+value, unit, plus the scheme and the 1-minute load average, which shows how busy the machine
+was).
 
-    python cases/benchmarks/bench_cracks.py [--sizes 1e5 1e6] [--repeats 5] [--out PATH]
+    python cases/benchmarks/bench_cracks.py [--sizes 1e5 1e6] [--repeats 5]
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
+import sys
 import time
 from pathlib import Path
-
-import sys
 
 import numba
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parents[1]))  # run from a checkout without installing
+from records import record, save  # noqa: E402
 
 from fdem.cohesive import CrackSet, four_slope_property_sets  # noqa: E402
 from fdem.mesh import structured_rectangle  # noqa: E402
 from fdem.topology import build_topology  # noqa: E402
-
-
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} logical cores, numba {numba.__version__}"
 
 
 def time_updates(cs: CrackSet, x: np.ndarray, f: np.ndarray, repeats: int, min_time: float = 0.2) -> float:
@@ -73,11 +59,10 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--schemes", nargs="+", default=["colour", "gather"])
     ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks" / "cracks.json")
+    ap.add_argument("--name", default="cracks", help="docs/benchmarks/<name>.json")
     args = ap.parse_args(argv)
 
     records = []
-    mach = machine()
     rng = np.random.default_rng(1)
     for size in args.sizes:
         nx = int(round(np.sqrt(size / 2.0)))
@@ -94,16 +79,10 @@ def main(argv=None) -> list[dict]:
                 numba.set_num_threads(th)
                 rate = time_updates(cs, x, f, args.repeats)
                 assert not cs.broken.any()
-                rec = dict(what="crack element updates per second", mesh_triangles=int(topo.n_triangles),
-                           crack_elements=int(topo.n_cracks), threads=th, scheme=scheme,
-                           value=round(rate / 1e6, 2), unit="million updates/s", machine=mach,
-                           load_average_1min=round(os.getloadavg()[0], 2))
-                records.append(rec)
-                print(f"{topo.n_triangles:>9d} tri {topo.n_cracks:>9d} cracks  {scheme:7s} {th} thread(s): "
-                      f"{rate / 1e6:8.1f} M updates/s", flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(records, indent=1) + "\n")
-    print(f"wrote {args.out}")
+                records.append(record(f"crack-element updates ({scheme} scheme)", rate, "crack updates/s",
+                                      int(topo.n_triangles), th, n_crack_elements=int(topo.n_cracks),
+                                      scheme=scheme, load_average_1min=round(os.getloadavg()[0], 2)))
+    save(args.name, records, scene="structured block, four-slope intact crack properties, elastic range")
     return records
 
 

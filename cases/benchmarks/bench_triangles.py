@@ -15,28 +15,20 @@ measured, mesh size, threads, value, unit and the machine.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import time
+import sys
 from pathlib import Path
 
 import numba
 import numpy as np
 
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import Model
-from fdem.solver import Simulation
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from records import best_rate, record, save  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def machine() -> dict:
-    load = os.getloadavg() if hasattr(os, "getloadavg") else None
-    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-            "python": platform.python_version(), "numba": numba.__version__, "numpy": np.__version__,
-            "cpu_count": os.cpu_count(), "load_average_at_start": load}
+from fdem.materials import ElasticMaterial  # noqa: E402
+from fdem.mesh import structured_rectangle  # noqa: E402
+from fdem.model import Model  # noqa: E402
+from fdem.solver import Simulation  # noqa: E402
 
 
 def block(n_tri_target: int) -> Simulation:
@@ -51,31 +43,17 @@ def block(n_tri_target: int) -> Simulation:
 
 
 def rate(sim: Simulation, ledger: bool, seconds: float, repeats: int) -> float:
-    """Best of ``repeats`` timings of as many steps as fit in ``seconds``: triangle-steps per second."""
-    sim.step(ledger=ledger)  # compile / warm up
-    t0 = time.perf_counter()
-    sim.step(ledger=ledger)
-    per_step = max(time.perf_counter() - t0, 1e-7)
-    n_steps = max(3, int(seconds / per_step))
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(n_steps):
-            sim.step(ledger=ledger)
-        best = min(best, (time.perf_counter() - t0) / n_steps)
-    return sim.model.n_triangles / best
+    """Triangle-steps per second of ``sim.step``, best of ``repeats`` timings."""
+    return best_rate(lambda: sim.step(ledger=ledger), sim.model.n_triangles, seconds, repeats)
 
 
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1e4 and 1e5 triangles, fewer repeats")
-    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks" / "triangles.json"))
     args = ap.parse_args(argv)
     sizes = [10_000, 100_000] if args.quick else [10_000, 100_000, 1_000_000]
     seconds, repeats = (0.3, 3) if args.quick else (1.0, 5)
-    info = machine()
     records = []
-    print(f"{'what':<34}{'triangles':>11}{'threads':>9}{'Mtri-steps/s':>15}")
     for size in sizes:
         sim = block(size)
         for threads in (1, 2):
@@ -84,16 +62,10 @@ def main(argv=None) -> list[dict]:
             numba.set_num_threads(threads)
             for what, ledger in (("fused step (fast kernel)", False), ("fused step + ledger row", True)):
                 value = rate(sim, ledger, seconds, repeats)
-                rec = {"measured": f"triangle-steps per second, intact elastic block, {what}",
-                       "n_triangles": int(sim.model.n_triangles), "threads": threads, "value": value,
-                       "unit": "triangle-steps/s", "machine": info,
-                       "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
-                records.append(rec)
-                print(f"{what:<34}{sim.model.n_triangles:>11}{threads:>9}{value / 1e6:>15.1f}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(records, indent=2) + "\n")
-    print(f"wrote {out}")
+                records.append(record(f"triangle-steps per second, intact elastic block, {what}", value,
+                                      "triangle-steps/s", int(sim.model.n_triangles), threads,
+                                      load_average_1min=round(os.getloadavg()[0], 2)))
+    save("triangles", records, scene="structured elastic block, gravity, fixed base, no crack elements")
     return records
 
 
