@@ -12,7 +12,9 @@ Broad phase
 Boxes of the contactors, grown by half the skin, are binned into a uniform grid by a counting
 sort (O(n)); each pair is reported once (from the cell holding the lower-left corner of the
 two boxes' intersection), so the result equals the brute-force all-pairs search for any cell
-size (:func:`fdem.kernels.contact.brute_force_pairs` is kept as the reference). The search is
+size (:func:`fdem.kernels.contact.brute_force_pairs` is kept as the reference). Box pairs
+that an edge normal of either triangle separates by more than the skin are dropped: they
+cannot touch before the next re-search (:func:`fdem.kernels.contact._far_apart`). The search is
 re-run only when some contactor node has moved more than half the skin since the last one:
 until then no pair missing from the list can have come into touch.
 
@@ -85,6 +87,7 @@ def _bond_table(topology: Topology, intact: np.ndarray) -> np.ndarray:
 def candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: float,
                     cell_size: float | None = None, max_cells_per_box: float = 4.0) -> np.ndarray:
     """(n_pairs, 2) candidate pairs ``i < j`` by the binned grid, sorted (see module docstring)."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
     active = np.ascontiguousarray(np.sort(np.asarray(active, dtype=np.int64)))
     box = kc.triangle_boxes(x, active, 0.5 * skin)
     if cell_size is None:
@@ -92,15 +95,16 @@ def candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: f
         ext = np.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])
         cell_size = max(float(np.percentile(ext, 90)), 1e-12) if len(box) else 1.0
     max_cells = max(1024.0, max_cells_per_box * len(active))
-    pi, pj = kc.grid_pairs(box, active, bond, float(cell_size), max_cells)
+    pi, pj = kc.grid_pairs(box, active, bond, x, float(skin), float(cell_size), max_cells)
     return np.column_stack([pi, pj])
 
 
 def brute_force_candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: float) -> np.ndarray:
     """Reference all-pairs search (O(n^2)) with the same criterion as :func:`candidate_pairs`."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
     active = np.ascontiguousarray(np.sort(np.asarray(active, dtype=np.int64)))
     box = kc.triangle_boxes(x, active, 0.5 * skin)
-    pi, pj = kc.brute_force_pairs(box, active, bond)
+    pi, pj = kc.brute_force_pairs(box, active, bond, x, float(skin))
     return np.column_stack([pi, pj])
 
 

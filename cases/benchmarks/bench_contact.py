@@ -10,7 +10,8 @@ triangle is a contactor and pairs with all its neighbours):
   overlaps and runs the full distributed-potential law, with Coulomb friction and contact
   damping on and random velocities.
 
-``pairs/s`` counts candidate pairs processed by one force evaluation (pair law, friction,
+``pairs/s`` counts candidate pairs processed by one force evaluation (``ms_per_call`` is the
+time of one evaluation: compare that across versions whose broad phase keeps different pairs) (pair law, friction,
 gather onto the nodes: the whole ``ContactSet.add_forces`` without a re-search) per wall
 second. The broad phase is timed separately as triangles binned and searched per second.
 Prints the records and writes ``docs/benchmarks/contact.json``
@@ -98,7 +99,7 @@ def main(argv=None) -> None:
             rate = best_rate(forces, n_pairs, args.repeats)
             records.append(record(f"contact pair forces, fragmented block {label}", rate, "pairs/s",
                                   mesh_size=topo.n_triangles, threads=threads, n_pairs=n_pairs,
-                                  n_overlapping=touching))
+                                  n_overlapping=touching, ms_per_call=1e3 * n_pairs / rate))
             if inflate == 0.0:
                 srate = best_rate(lambda: cs.search(x), topo.n_triangles, args.repeats)
                 records.append(record("contact broad phase (grid + incidence), fragmented block", srate,

@@ -40,6 +40,20 @@ Evaluation (all integrals exact)
    arithmetic: exact zeros for corners lying on an edge of the other triangle (touching
    counts as apart). Most candidate pairs of a settled pile end here after 18 differences
    and 18 determinants, inlined in the pair loop (no call, no reference counting).
+   Round-off slivers count as touching too: the pair is skipped unless ``c`` reaches past
+   every edge line of ``t`` by more than ``TOUCH_EPS = 1e-12`` of the altitude on it
+   (``max_i u_ij > TOUCH_EPS 2A_t`` for each ``j``) and ``t`` past every edge line of ``c``
+   likewise (``max_k v_kj > TOUCH_EPS 2A_c``). Bound on what a skipped pair would have carried: if
+   ``max_i lambda^t_j(c_i) <= eps`` then ``D`` lies in the strip ``0 <= lambda^t_j <= eps`` of
+   ``t``, so ``area(D) <= 2 eps A_t``, ``phi_t <= 3 eps`` on ``D`` and ``phi_c <= 3 eps h_t / h_c``
+   on ``t``'s boundary inside ``c``; hence ``E <= 2 eps p A_t (1 + 3 eps)`` and every nodal force
+   is ``O(eps p L max(1, h_t / h_c))``, the force of a flat overlap ``eps h`` deep (about
+   ``1e-13`` m for metre-size triangles: far below the physical overlaps ``F / p``). Dropping
+   it makes ``E`` jump by at most that bound when the reach crosses the threshold; such a pair
+   is treated as separated (its friction history is dropped, as for any pair that separates,
+   with the spring's stored energy, at most ``(mu F_n)^2 / 2k_t``, booked as dissipated). In a
+   settled pile more than half the "overlapping" neighbour pairs are such slivers (corners
+   and edges that coincide up to round-off).
 2. Overlap polygon ``D``: ``c`` clipped by the half-planes of ``t`` that cut one of ``c``'s
    corners off (Sutherland-Hodgman on a pool of vertices referenced by index, so a kept
    corner costs one index copy). Each corner carries
@@ -97,6 +111,9 @@ FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 """Fast-math flags of the narrow phase (no ``nnan``/``ninf``: NaNs still propagate). The
 separating-axis determinants (:func:`_sat`) are compiled strictly, so that touching corners
 give exact zeros (no fused multiply-add)."""
+TOUCH_EPS = 1e-12
+"""Relative reach below which a pair counts as touching, not overlapping (see :func:`_sat`):
+round-off slivers of settled neighbours skip the narrow phase (bound in the module docstring)."""
 PARALLEL_MIN_PAIRS = 4096
 """Below this many candidate pairs the per-step kernels run serially: waking the thread pool
 costs more than the work (and far more on a loaded machine, where OpenMP workers spin)."""
@@ -254,7 +271,9 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
 
     ``u_ij = 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}`` and
     ``v_kj = 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}`` with ``D_ik = t_k - c_i``; the pair
-    is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``.
+    is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
+    counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
+    ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
     Returns ``(overlap?, u00, u01, ..., u22)``.
     """
     # differences D_ik = t_k - c_i
@@ -296,9 +315,12 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     v20 = _orient(d12x, d12y, d22x, d22y)
     v21 = _orient(d22x, d22y, d02x, d02y)
     v22 = _orient(d02x, d02y, d12x, d12y)
-    sep = min(min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22))),
-              min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22))))
-    return sep > 0.0, u00, u01, u02, u10, u11, u12, u20, u21, u22
+    # deepest reach of c past each edge line of t (and of t past c's), against the threshold
+    # TOUCH_EPS 2A (2A_t = u_i0 + u_i1 + u_i2, 2A_c = v_k0 + v_k1 + v_k2 for any i, k)
+    reach_t = min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22)))
+    reach_c = min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22)))
+    hit = reach_t > TOUCH_EPS * (u00 + u01 + u02) and reach_c > TOUCH_EPS * (v00 + v01 + v02)
+    return hit, u00, u01, u02, u10, u11, u12, u20, u21, u22
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -856,10 +878,54 @@ def _bonded(bond, i, j):
     return bond[i, 0] == j or bond[i, 1] == j or bond[i, 2] == j
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _axis_gap(nx, ny, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """Gap between the projections of c and t on the (unnormalised) direction ``n``:
+    ``max(min n.c - max n.t, min n.t - max n.c)`` (negative when the projections overlap)."""
+    pc0 = nx * c0x + ny * c0y
+    pc1 = nx * c1x + ny * c1y
+    pc2 = nx * c2x + ny * c2y
+    pt0 = nx * t0x + ny * t0y
+    pt1 = nx * t1x + ny * t1y
+    pt2 = nx * t2x + ny * t2y
+    return max(min(pc0, min(pc1, pc2)) - _max3(pt0, pt1, pt2), min(pt0, min(pt1, pt2)) - _max3(pc0, pc1, pc2))
+
+
 @njit(cache=True, error_model="numpy")
-def brute_force_pairs(box, active, bond):
+def _far_apart(x, i, j, gap):
+    """True when an edge normal of triangle ``i`` or ``j`` separates them by more than ``gap`` [m].
+
+    A fixed direction stays separating while every node moves less than ``gap / 2``: the
+    projections then move less than ``gap`` relative to each other. So such a pair cannot touch
+    before the next re-search (every node within half the skin) and need not be a candidate;
+    this drops the pairs whose grown boxes overlap only across a corner (a third of a
+    structured mesh's box pairs). Edge normal ``n = (e_y, -e_x)``: gap > ``gap |e|``.
+    """
+    c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
+    for k in range(6):
+        if k == 0:
+            ex, ey = c1x - c0x, c1y - c0y
+        elif k == 1:
+            ex, ey = c2x - c1x, c2y - c1y
+        elif k == 2:
+            ex, ey = c0x - c2x, c0y - c2y
+        elif k == 3:
+            ex, ey = t1x - t0x, t1y - t0y
+        elif k == 4:
+            ex, ey = t2x - t1x, t2y - t1y
+        else:
+            ex, ey = t0x - t2x, t0y - t2y
+        g = _axis_gap(ey, -ex, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+        if g > 0.0 and g * g > gap * gap * (ex * ex + ey * ey):
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def brute_force_pairs(box, active, bond, x, gap):
     """Reference broad phase, O(n^2): all ``(i, j)``, ``i < j``, of active triangles whose grown
-    boxes overlap and that are not bonded by an intact crack element, sorted by ``(i, j)``.
+    boxes overlap, that no edge normal separates by more than ``gap`` (:func:`_far_apart`) and
+    that are not bonded by an intact crack element, sorted by ``(i, j)``.
 
     ``active`` must be sorted ascending; ``bond[t]`` lists the (up to 3) triangles bonded to t, -1
     padded.
@@ -868,14 +934,16 @@ def brute_force_pairs(box, active, bond):
     cnt = 0
     for a in range(n):
         for b in range(a + 1, n):
-            if _boxes_overlap(box, a, b) and not _bonded(bond, active[a], active[b]):
+            if (_boxes_overlap(box, a, b) and not _bonded(bond, active[a], active[b])
+                    and not _far_apart(x, active[a], active[b], gap)):
                 cnt += 1
     pi = np.empty(cnt, np.int64)
     pj = np.empty(cnt, np.int64)
     cnt = 0
     for a in range(n):
         for b in range(a + 1, n):
-            if _boxes_overlap(box, a, b) and not _bonded(bond, active[a], active[b]):
+            if (_boxes_overlap(box, a, b) and not _bonded(bond, active[a], active[b])
+                    and not _far_apart(x, active[a], active[b], gap)):
                 pi[cnt] = active[a]
                 pj[cnt] = active[b]
                 cnt += 1
@@ -933,7 +1001,7 @@ def _grid_bin(box, cell, max_cells):
 
 
 @njit(cache=True, error_model="numpy")
-def _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, outj, write):
+def _query(a, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, outj, write):
     """Partners ``b`` of box ``a`` with ``active[b] > active[a]``: each pair is reported once, from
     the cell holding the lower-left corner of the two boxes' intersection. Returns the count."""
     ix0 = int((box[a, 0] - x0) / cell)
@@ -952,7 +1020,7 @@ def _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, outj, w
                     continue
                 cx = int((max(box[a, 0], box[b, 0]) - x0) / cell)
                 cy = int((max(box[a, 1], box[b, 1]) - y0) / cell)
-                if cx != ix or cy != iy or _bonded(bond, ta, tb):
+                if cx != ix or cy != iy or _bonded(bond, ta, tb) or _far_apart(x, ta, tb, gap):
                     continue
                 if write:
                     outj[cnt] = tb
@@ -961,12 +1029,12 @@ def _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, outj, w
 
 
 @njit(cache=True, error_model="numpy")
-def _fill_partners(a, lo, hi, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, pi, pj):
+def _fill_partners(a, lo, hi, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, pi, pj):
     """Write box ``a``'s partners into ``pj[lo:hi]`` sorted (insertion sort: they are few)."""
     if hi == lo:
         return
     seg = pj[lo:hi]
-    _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, seg, True)
+    _query(a, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, seg, True)
     for r in range(1, hi - lo):
         val = seg[r]
         s = r - 1
@@ -979,27 +1047,27 @@ def _fill_partners(a, lo, hi, box, active, bond, x0, y0, cell, nx, cell_ptr, cel
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _grid_query_parallel(box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, counts):
+def _grid_query_parallel(box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, counts):
     n = box.shape[0]
     dummy = np.empty(0, np.int64)
     for a in prange(n):
-        counts[a + 1] = _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, dummy, False)
+        counts[a + 1] = _query(a, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, dummy, False)
     for a in range(n):
         counts[a + 1] += counts[a]
     pi = np.empty(counts[n], np.int64)
     pj = np.empty(counts[n], np.int64)
     for a in prange(n):
-        _fill_partners(a, counts[a], counts[a + 1], box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items,
+        _fill_partners(a, counts[a], counts[a + 1], box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items,
                        pi, pj)
     return pi, pj
 
 
 @njit(cache=True, error_model="numpy")
-def grid_pairs(box, active, bond, cell, max_cells):
+def grid_pairs(box, active, bond, x, gap, cell, max_cells):
     """Linear-time broad phase on a uniform grid (counting sort of boxes into cells).
 
-    Same result as :func:`brute_force_pairs` (same box test, same bond exclusion), for any cell
-    size. Pairs come out sorted by ``(i, j)`` because ``active`` is sorted and each triangle's
+    Same result as :func:`brute_force_pairs` (same box test, same edge-normal pruning by ``gap``,
+    same bond exclusion), for any cell size. Pairs come out sorted by ``(i, j)`` because ``active`` is sorted and each triangle's
     partners are sorted. Cost O(n) for a cell about the size of a box. The queries run in
     parallel for large sets (two passes: count, then fill).
     """
@@ -1009,15 +1077,15 @@ def grid_pairs(box, active, bond, cell, max_cells):
     x0, y0, cell, nx, ny, cell_ptr, cell_items = _grid_bin(box, cell, max_cells)
     counts = np.zeros(n + 1, np.int64)
     if n >= PARALLEL_MIN_PAIRS // 4:
-        return _grid_query_parallel(box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, counts)
+        return _grid_query_parallel(box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, counts)
     dummy = np.empty(0, np.int64)
     for a in range(n):
-        counts[a + 1] = counts[a] + _query(a, box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items, dummy,
+        counts[a + 1] = counts[a] + _query(a, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, dummy,
                                            False)
     pi = np.empty(counts[n], np.int64)
     pj = np.empty(counts[n], np.int64)
     for a in range(n):
-        _fill_partners(a, counts[a], counts[a + 1], box, active, bond, x0, y0, cell, nx, cell_ptr, cell_items,
+        _fill_partners(a, counts[a], counts[a + 1], box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items,
                        pi, pj)
     return pi, pj
 
