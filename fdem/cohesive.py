@@ -431,10 +431,9 @@ class CrackSet:
         C[:, 2] = ft / self.kn
         C[:, 3] = c * w
         C[:, 4] = tanphi
-        C[:, 5] = 1.0 / dO
+        C[:, 5] = np.where(kind == K.LINEAR, -1.0, 1.0) / dO  # sign: softening shape
         C[:, 6] = inv_dK
-        C[:, 7] = kind
-        C[:, 8] = self.kc * w
+        C[:, 7] = self.kc * w
         if self._elastic_only:
             # Peak opening and cohesion out of reach: every update takes the elastic fast path.
             C[:, 2] = ELASTIC_ONLY_LIMIT

@@ -478,7 +478,7 @@ def test_benchmark_script_runs(tmp_path: Path):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     out = tmp_path / "cracks.json"
-    recs = mod.main(["--sizes", "2000", "--threads", "1", "--repeats", "1", "--out", str(out)])
+    recs = mod.main(["--sizes", "2000", "--threads", "1", "--repeats", "1", "--name", str(tmp_path / "cracks")])
     assert out.exists() and len(recs) == 2 and all(r["value"] > 0 for r in recs)
 
 

@@ -7,8 +7,8 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``nodes : (n, 4) int32``
     ``[A_p, A_q, B_q, B_p]`` (see :mod:`fdem.topology`). End 0 of the element is the node pair
     (0, 3), end 1 the pair (1, 2); the integration points are these two ends.
-``const : (n, 9) float64``
-    Per-element constants, already multiplied by the end weight ``w = L0/2``
+``const : (n, 8) float64``
+    Per-element constants, one 64-byte row, already multiplied by the end weight ``w = L0/2``
     where marked ``*w``:
 
     ====  ===========  ===============================================================
@@ -19,10 +19,11 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
     2     ``op``       opening at the tensile peak ``o_p = f_t / k_n`` [m]
     3     ``C``        cohesion force, ``c w`` [N]                            (``*w``)
     4     ``tanphi``   friction coefficient ``tan(phi)`` [-]
-    5     ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage [1/m]
+    5     ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage [1/m];
+                       negative for linear softening (the sign carries the shape, so the
+                       row stays one cache line)
     6     ``inv_dK``   ``1/kappa_r``, inverse plastic slip to full damage [1/m] (0: no cohesion)
-    7     ``kind``     softening shape: 0 Munjiza (Evans-Marathe), 1 linear
-    8     ``Kc``       normal stiffness in compression, ``k_c w`` [N/m]       (``*w``);
+    7     ``Kc``       normal stiffness in compression, ``k_c w`` [N/m]       (``*w``);
                        ``Kn`` unless matched to contact (see ``CrackSet``)
     ====  ===========  ===============================================================
 
@@ -56,7 +57,7 @@ EM_C = 6.0
 MUNJIZA = 0
 LINEAR = 1
 
-N_CONST = 9
+N_CONST = 8
 N_STATE = 6
 PARALLEL_MIN = 4096
 """Below this many live elements the serial loop is used (a parallel region costs more)."""
@@ -214,22 +215,23 @@ def element_update(c, x, nodes, const, status, state, diss):
     op = const[c, 2]
     C = const[c, 3]
     tanphi = const[c, 4]
-    Kc = const[c, 8]
+    Kc = const[c, 7]
     # Fast path of point_law for both ends at once (nearly every element, every step): an
     # element that never left the elastic range (status 0: D = kappa = s_pl = 0) and stays
     # below the tensile peak and inside the Mohr-Coulomb envelope. Reads no state, stores nothing.
-    sig0 = Kn * max(o0, 0.0) + Kc * min(o0, 0.0)
+    sig0 = (Kn if o0 > 0.0 else Kc) * o0
     tau0 = Kt * s0
-    sig1 = Kn * max(o1, 0.0) + Kc * min(o1, 0.0)
+    sig1 = (Kn if o1 > 0.0 else Kc) * o1
     tau1 = Kt * s1
     elastic = ((status[c] == 0) & (o0 <= op) & (o1 <= op)
                & (abs(tau0) <= C + max(-sig0, 0.0) * tanphi) & (abs(tau1) <= C + max(-sig1, 0.0) * tanphi))
     broke = False
     if not elastic:
         status[c] = 1
-        inv_dO = const[c, 5]
+        signed_inv_dO = const[c, 5]
+        inv_dO = abs(signed_inv_dO)
         inv_dK = const[c, 6]
-        kind = int(const[c, 7])
+        kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
         sig0, tau0, Dn0, kn0, sn0, wI0, wII0, wf0 = point_law(
             o0, s0, state[c, 0], state[c, 1], state[c, 2], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
         sig1, tau1, Dn1, kn1, sn1, wI1, wII1, wf1 = point_law(
@@ -388,8 +390,8 @@ def crack_elastic_energy(x, nodes, const, state, active):
         Kt = const[c, 1]
         op = const[c, 2]
         Ft = Kn * op
-        dO = 1.0 / const[c, 5]
-        kind = int(const[c, 7])
+        dO = 1.0 / abs(const[c, 5])
+        kind = LINEAR if const[c, 5] < 0.0 else MUNJIZA
         for end in range(2):
             if end == 0:
                 dx = x[i3, 0] - x[i0, 0]
@@ -406,7 +408,7 @@ def crack_elastic_energy(x, nodes, const, state, active):
             op_ = max(o, 0.0)
             on_ = min(o, 0.0)
             tau = Kt * (s - state[c, 3 * end + 2])
-            e += 0.5 * sec * op_ * op_ + 0.5 * const[c, 8] * on_ * on_ + 0.5 * tau * tau / Kt
+            e += 0.5 * sec * op_ * op_ + 0.5 * const[c, 7] * on_ * on_ + 0.5 * tau * tau / Kt
     return e
 
 
@@ -418,7 +420,7 @@ def stable_dt_kernel(mass, nodes, const, active, n_nodes):
     K = np.zeros(n_nodes)
     for j in range(active.shape[0]):
         c = active[j]
-        k = max(const[c, 0], const[c, 1], const[c, 8])
+        k = max(const[c, 0], const[c, 1], const[c, 7])
         for q in range(4):
             K[nodes[c, q]] += k
     dt = np.inf
