@@ -180,3 +180,20 @@ def structured_rectangle(nx: int, ny: int, width: float, height: float, origin=(
     line_group = np.repeat(np.arange(4, dtype=np.int32), [len(s) for s in sides])
     return Mesh(points=points, triangles=triangles, triangle_body=np.zeros(len(triangles), np.int32),
                 lines=lines, line_group=line_group, group_names=("bottom", "right", "top", "left"))
+
+
+def jittered_rectangle(nx: int, ny: int, width: float, height: float, amount: float = 0.25,
+                       seed: int = 0) -> Mesh:
+    """:func:`structured_rectangle` with its interior nodes moved at random by up to ``amount``
+    cell sizes in x and y (boundary nodes stay put): an irregular mesh of known extent for patch
+    tests and verification. ``amount < 0.5`` keeps every triangle valid."""
+    if not 0 <= amount < 0.5:
+        raise ValueError(f"jittered_rectangle: amount must lie in [0, 0.5) cells, got {amount}")
+    mesh = structured_rectangle(nx, ny, width, height)
+    p = mesh.points.copy()
+    tol = 1e-12 * max(width, height)
+    interior = (p[:, 0] > tol) & (p[:, 0] < width - tol) & (p[:, 1] > tol) & (p[:, 1] < height - tol)
+    rng = np.random.default_rng(seed)
+    p[interior] += amount * rng.uniform(-1, 1, (int(interior.sum()), 2)) * [width / nx, height / ny]
+    return Mesh(points=p, triangles=mesh.triangles, triangle_body=mesh.triangle_body, lines=mesh.lines,
+                line_group=mesh.line_group, group_names=mesh.group_names)

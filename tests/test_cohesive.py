@@ -8,7 +8,6 @@ are those of docs/verification.md (peak 0.5 %, energy 1 %).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -468,18 +467,6 @@ def test_elastic_energy_and_stable_dt():
             v += -(2 * k_end / 2.0) * u * dt
             u += v * dt
         assert (abs(u) < 1e-8) == bounded
-
-
-def test_benchmark_script_runs(tmp_path: Path):
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "cases" / "benchmarks" / "bench_cracks.py"
-    spec = importlib.util.spec_from_file_location("bench_cracks", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    out = tmp_path / "cracks.json"
-    recs = mod.main(["--sizes", "2000", "--threads", "1", "--repeats", "1", "--name", str(tmp_path / "cracks")])
-    assert out.exists() and len(recs) == 2 and all(r["value"] > 0 for r in recs)
 
 
 def test_held_elastic_elements_neither_damage_nor_break():

@@ -221,3 +221,15 @@ def test_structured_rectangle_topology_counts():
     # Interior edges: horizontal 4*2 + vertical 3*3 + diagonals 12.
     assert topo.n_cracks == 8 + 9 + 12
     assert topo.triangle_area0.sum() == pytest.approx(12.0)
+
+
+def test_jittered_rectangle_keeps_area_and_boundary():
+    from fdem.mesh import jittered_rectangle
+
+    mesh = jittered_rectangle(6, 5, 3.0, 2.0, amount=0.3, seed=4)
+    topo = build_topology(mesh)
+    assert np.all(topo.triangle_area0 > 0)
+    assert topo.triangle_area0.sum() == pytest.approx(6.0, rel=1e-12)
+    assert not np.allclose(mesh.points, structured_rectangle(6, 5, 3.0, 2.0).points)
+    with pytest.raises(ValueError, match="amount must lie in"):
+        jittered_rectangle(2, 2, 1.0, 1.0, amount=0.5)

@@ -104,15 +104,19 @@ def test_history_csv_has_ledger_and_monitor_columns(tmp_path):
     np.testing.assert_allclose(h["balance_error"], 0.0, atol=1e-6 * np.abs(h["gravity_potential"]).max())
 
 
-def test_write_vtu_large_mesh_is_fast(tmp_path):
-    import time
+def test_write_vtu_large_mesh_round_trips_exactly(tmp_path):
+    import meshio
 
     n = 100_000
     pts = np.random.default_rng(0).random((3 * n, 2))
     cells = np.arange(3 * n).reshape(n, 3)
-    t0 = time.perf_counter()
-    write_vtu(tmp_path / "big.vtu", pts, cells, point_data={"u": pts}, cell_data={"s": np.ones(n)})
-    assert time.perf_counter() - t0 < 2.0
+    s = np.random.default_rng(1).random(n)
+    write_vtu(tmp_path / "big.vtu", pts, cells, point_data={"u": pts}, cell_data={"s": s})
+    back = meshio.read(tmp_path / "big.vtu")
+    np.testing.assert_array_equal(back.points[:, :2], pts)
+    np.testing.assert_array_equal(back.cells_dict["triangle"], cells)
+    np.testing.assert_array_equal(back.point_data["u"][:, :2], pts)
+    np.testing.assert_array_equal(back.cell_data["s"][0], s)
 
 
 def test_instability_guard_stops_with_message_and_last_good_state(tmp_path):

@@ -1,11 +1,10 @@
 """Explicit solver: wave speed, gravity column, energy conservation, damping, time step, providers."""
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from fdem.materials import ElasticMaterial, bar_wave_speed, k0_elastic, stable_dt_spring
-from fdem.mesh import structured_rectangle
+from fdem.mesh import jittered_rectangle, structured_rectangle
 from fdem.model import Model, geostatic_stress
 from fdem.solver import Damping, Simulation
 
@@ -13,12 +12,7 @@ E, NU, RHO, G = 1e9, 0.25, 2000.0, 10.0
 
 
 def jittered_mesh(nx, ny, w, h, amount=0.25, seed=1):
-    mesh = structured_rectangle(nx, ny, w, h)
-    rng = np.random.default_rng(seed)
-    p = mesh.points.copy()
-    interior = (p[:, 0] > 1e-12) & (p[:, 0] < w - 1e-12) & (p[:, 1] > 1e-12) & (p[:, 1] < h - 1e-12)
-    p[interior] += amount * rng.uniform(-1, 1, (interior.sum(), 2)) * [w / nx, h / ny]
-    return replace(mesh, points=p)
+    return jittered_rectangle(nx, ny, w, h, amount, seed)
 
 
 class PenaltyTies:

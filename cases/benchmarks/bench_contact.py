@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numba
@@ -36,29 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fdem import contact as fc  # noqa: E402
 from fdem.mesh import structured_rectangle  # noqa: E402
 from fdem.topology import build_topology  # noqa: E402
-from records import record, save  # noqa: E402
-
-
-def best_rate(fn, count: int, repeats: int, min_time: float = 0.3) -> float:
-    """Best-of-``repeats`` ``count / seconds`` of ``fn()`` (called enough times per repeat)."""
-    fn()  # compile / warm up
-    n_calls = 1
-    while True:
-        t0 = time.perf_counter()
-        for _ in range(n_calls):
-            fn()
-        el = time.perf_counter() - t0
-        if el > 0.05:
-            break
-        n_calls *= 4
-    n_calls = max(1, int(n_calls * min_time / el))
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(n_calls):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / n_calls)
-    return count / best
+from records import best_rate, record, save  # noqa: E402
 
 
 def fragmented_block(n: int, penalty: float, inflate: float, rng):
@@ -96,12 +73,12 @@ def main(argv=None) -> None:
                 f[:] = 0.0
                 cs.add_forces(x, v, f, 1e-6, 0)
 
-            rate = best_rate(forces, n_pairs, args.repeats)
+            rate = best_rate(forces, n_pairs, 0.3, args.repeats)
             records.append(record(f"contact pair forces, fragmented block {label}", rate, "pairs/s",
                                   mesh_size=topo.n_triangles, threads=threads, n_pairs=n_pairs,
                                   n_overlapping=touching, ms_per_call=1e3 * n_pairs / rate))
             if inflate == 0.0:
-                srate = best_rate(lambda: cs.search(x), topo.n_triangles, args.repeats)
+                srate = best_rate(lambda: cs.search(x), topo.n_triangles, 0.3, args.repeats)
                 records.append(record("contact broad phase (grid + incidence), fragmented block", srate,
                                       "triangles/s", mesh_size=topo.n_triangles, threads=threads,
                                       n_pairs=n_pairs))

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 import numba
@@ -23,34 +22,11 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1]))  # run from a checkout without installing
-from records import record, save  # noqa: E402
+from records import best_rate, record, save  # noqa: E402
 
 from fdem.cohesive import CrackSet, four_slope_property_sets  # noqa: E402
 from fdem.mesh import structured_rectangle  # noqa: E402
 from fdem.topology import build_topology  # noqa: E402
-
-
-def time_updates(cs: CrackSet, x: np.ndarray, f: np.ndarray, repeats: int, min_time: float = 0.2) -> float:
-    """Best-of-``repeats`` crack updates per second (samples of about ``min_time`` s each; the
-    best sample is the least disturbed by other processes on a shared machine)."""
-    cs.add_forces(x, None, f, 1e-6, 0)  # compile / warm up
-    n_calls = 1
-    while True:
-        t0 = time.perf_counter()
-        for k in range(n_calls):
-            cs.add_forces(x, None, f, 1e-6, k)
-        el = time.perf_counter() - t0
-        if el > 0.05:
-            break
-        n_calls *= 4
-    n_calls = max(1, int(n_calls * min_time / el))
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for k in range(n_calls):
-            cs.add_forces(x, None, f, 1e-6, k)
-        best = min(best, (time.perf_counter() - t0) / n_calls)
-    return cs.n_active / best
 
 
 def main(argv=None) -> list[dict]:
@@ -77,7 +53,7 @@ def main(argv=None) -> list[dict]:
                 if th > numba.config.NUMBA_NUM_THREADS:
                     continue
                 numba.set_num_threads(th)
-                rate = time_updates(cs, x, f, args.repeats)
+                rate = best_rate(lambda: cs.add_forces(x, None, f, 1e-6, 0), cs.n_active, 0.2, args.repeats)
                 assert not cs.broken.any()
                 records.append(record(f"crack-element updates ({scheme} scheme)", rate, "crack updates/s",
                                       int(topo.n_triangles), th, n_crack_elements=int(topo.n_cracks),

@@ -48,17 +48,22 @@ def save(name: str, records: list[dict], **meta) -> Path:
 
 
 def best_rate(step, items_per_call: int, seconds: float = 1.0, repeats: int = 5) -> float:
-    """Items per second of ``step()``: best of ``repeats`` timings of as many calls as fit in ``seconds``.
-
-    The first call is a warm-up (Numba compilation, first-touch of memory) and is not timed.
-    """
+    """Items per second of ``step()``: best of ``repeats`` timings of as many calls as fill about
+    ``seconds``. The first call is a warm-up (Numba compilation, first touch of memory); the best
+    sample is the one least disturbed by other processes."""
     import time
 
     step()
-    t0 = time.perf_counter()
-    step()
-    per_call = max(time.perf_counter() - t0, 1e-7)
-    n_calls = max(3, int(seconds / per_call))
+    n_calls = 1
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(n_calls):
+            step()
+        elapsed = time.perf_counter() - t0
+        if elapsed > 0.05:
+            break
+        n_calls *= 4
+    n_calls = max(1, int(n_calls * seconds / elapsed))
     best = float("inf")
     for _ in range(repeats):
         t0 = time.perf_counter()
