@@ -111,12 +111,18 @@ def main(argv=None) -> dict:
     parser.add_argument("--max-steps", type=int, default=None, help="cap on the total steps (0: mesh only)")
     parser.add_argument("--no-pictures", action="store_true", help="skip PNG snapshots of each output frame")
     args = parser.parse_args(argv)
-    spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
+    try:
+        spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
+    except ValueError:
+        parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine)
+        try:
+            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine)
+        except ValueError as err:  # bad input: say what is wrong, no traceback
+            parser.error(str(err))
     for w in caught:
         print(f"warning: {w.message}")
     elapsed = time.perf_counter() - t0
