@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .geometry import BrickSet, IntermittentSet, Model, rectangle, simple_slope
+from .geometry import BrickSet, IntermittentSet, Model, SegmentSet, rectangle, simple_slope
 
 FOUR_SLOPE_HEIGHT = 15.0
 FOUR_SLOPE_FACE_ANGLE = 45.0
@@ -78,3 +78,66 @@ def block_on_incline_model(block_width: float = 1.0, block_height: float = 1.0, 
     x0 = 0.5 * (base_length - block_width)
     block = rectangle(x0, base_thickness, block_width, block_height, name="block")
     return Model([base, block])
+
+
+def planar_slope_model(height: float, face_angle: float, plane_angle: float, crest_length: float | None = None,
+                       toe_length: float | None = None, base_depth: float | None = None,
+                       tension_crack_offset: float | None = None, toe_step: float | None = None) -> Model:
+    """A slope with one persistent joint daylighting in the face: the planar-failure verification
+    problem (Hoek & Bray 1981, ch. 7; Wyllie & Mah 2004, ch. 6; :mod:`fdem.limit_equilibrium`).
+
+    ``height`` H [m] is the face above the daylight point ``D`` of the plane, ``face_angle``
+    psi_f and ``plane_angle`` psi_p [deg] (``psi_p < psi_f``). Joint set 1 is the sliding plane,
+    from ``D`` up at psi_p to the horizontal upper surface, or, with ``tension_crack_offset`` b
+    [m], to the foot of a vertical tension crack b behind the crest: joint set 2, of depth
+    ``z = H - (H cot psi_f + b) tan psi_p``.
+
+    ``toe_step`` [m] (default ``H/5``) continues the face below ``D`` down to the toe floor. The
+    down-dip direction from ``D`` points into air only there: with the plane daylighting at the
+    very toe of a horizontal floor (``toe_step=0``) the block's tip is driven into the floor
+    rock, which then holds the block; limit equilibrium assumes it free to slide out.
+
+    Assumed extents: toe floor ``toe_length`` (default H) left of the toe, base ``base_depth``
+    (default H/2) below it, and a crest plateau reaching ``crest_length`` (default H beyond the
+    point where the plane or the crack meets the upper surface) behind the crest. ``D`` lies at
+    ``(toe_length + toe_step cot psi_f, base_depth + toe_step)``.
+    """
+    H, pf, pp = float(height), float(face_angle), float(plane_angle)
+    if not H > 0:
+        raise ValueError(f"planar slope: height must be positive, got {height} m")
+    if not 0 < pp < pf <= 90:
+        raise ValueError(f"planar slope: need 0 < plane angle < face angle <= 90 deg for the plane to daylight "
+                         f"in the face, got plane {plane_angle} deg, face {face_angle} deg")
+    step = 0.2 * H if toe_step is None else float(toe_step)
+    if step < 0:
+        raise ValueError(f"planar slope: toe_step must be >= 0, got {toe_step} m")
+    cot_f = 0.0 if pf == 90 else 1.0 / math.tan(math.radians(pf))
+    cot_p, tan_p = 1.0 / math.tan(math.radians(pp)), math.tan(math.radians(pp))
+    run_above = H * cot_f                      # face run from D to the crest
+    if tension_crack_offset is None:
+        reach = H * cot_p                      # plane meets the upper surface this far from D
+    else:
+        b = float(tension_crack_offset)
+        reach = run_above + b
+        if b <= 0 or reach * tan_p >= H:
+            raise ValueError(f"planar slope: the tension crack must stand behind the crest (b > 0) and reach the "
+                             f"plane below the surface (b < {H * cot_p - run_above:.6g} m), got b = {b} m")
+    toe_length = H if toe_length is None else float(toe_length)
+    base_depth = 0.5 * H if base_depth is None else float(base_depth)
+    crest_length = (reach - run_above) + H if crest_length is None else float(crest_length)
+    if crest_length <= reach - run_above:
+        raise ValueError(f"planar slope: crest_length {crest_length} m must exceed "
+                         f"{reach - run_above:.6g} m, where the joints meet the upper surface")
+    if step > 0:
+        slope = simple_slope(H + step, pf, crest_length=crest_length, toe_length=toe_length,
+                             base_depth=base_depth, name="slope")
+        dx, dy = toe_length + step * cot_f, base_depth + step
+    else:
+        slope = simple_slope(H, pf, crest_length=crest_length, toe_length=toe_length, base_depth=base_depth,
+                             name="slope")
+        dx, dy = toe_length, base_depth
+    end = (dx + reach, dy + reach * tan_p)
+    sets = [SegmentSet([[dx, dy, end[0], end[1]]], name="sliding plane")]
+    if tension_crack_offset is not None:
+        sets.append(SegmentSet([[end[0], end[1], end[0], dy + H]], name="tension crack"))
+    return Model([slope], sets)
