@@ -10,6 +10,11 @@ body together. Exact answers:
 * toppling (Goodman and Bray, ``phi > theta``): a block of width ``b`` and height ``h`` topples
   when ``b / h < tan theta``.
 
+Dynamic stage: element damping (a fraction of critical of each triangle's highest mode,
+:meth:`fdem.model.Model.set_element_damping`, default ``DEFAULT_ELEMENT_DAMPING``) keeps the
+constant-strain triangles from ringing; ``--element-damping 0`` runs undamped
+(``docs/damping.md``).
+
     python cases/block_on_incline.py --theta 30 --phi 20 --out runs/incline
 """
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +32,7 @@ from fdem.contact import ContactSet
 from fdem.geometry import Model as Geometry, rectangle
 from fdem.materials import ElasticMaterial
 from fdem.meshing import mesh_model
-from fdem.model import Model
+from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
 from fdem.solver import Simulation
 from fdem.topology import build_topology
 
@@ -48,14 +54,21 @@ def sliding_distance(theta_deg: float, phi_deg: float, t: float) -> float:
 
 
 def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_height: float = 1.0,
-          size: float | None = None, base_length: float = 8.0):
-    """Model, crack set, contact set and the block's node ids."""
+          size: float | None = None, base_length: float = 8.0,
+          element_damping: float = DEFAULT_ELEMENT_DAMPING):
+    """Model, crack set, contact set and the block's node ids.
+
+    ``size`` [m]: target element size (default half the block's smaller side);
+    ``element_damping``: fraction of critical viscosity of each triangle (0: none).
+    """
     size = size or min(block_width, block_height) / 2
     base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
     x0 = 0.25 * base_length
     block = rectangle(x0, 0.5, block_width, block_height, name="block")
     topo = build_topology(mesh_model(Geometry([base, block]), size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    if element_damping > 0:
+        model.set_element_damping(element_damping)
     th = math.radians(theta_deg)
     model.set_gravity(G * math.sin(th), -G * math.cos(th))
     base_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 0, 3))
@@ -67,13 +80,17 @@ def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_heig
 
 
 def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float = 1.0, block_height: float = 1.0,
-        out_dir: Path | None = None, energy_tolerance: float | None = 0.05) -> dict:
+        out_dir: Path | None = None, energy_tolerance: float | None = 0.05, size: float | None = None,
+        element_damping: float = DEFAULT_ELEMENT_DAMPING) -> dict:
     """Release the block from rest; return its mean slide along the plane and its rotation at ``t_end``."""
-    model, cracks, contact, block = build(theta_deg, phi_deg, block_width, block_height)
+    model, cracks, contact, block = build(theta_deg, phi_deg, block_width, block_height, size=size,
+                                          element_damping=element_damping)
     sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="incline", progress=False)
+    wall = time.perf_counter()
     x0 = sim.state.x[block].copy()
     sim.run(t_end=t_end, output_every=10**9 if out_dir is None else None, energy_tolerance=energy_tolerance)
     sim.close()
+    wall = time.perf_counter() - wall
     x = sim.state.x[block]
     slide = float((x[:, 0] - x0[:, 0]).mean())
     # Rigid rotation of the block: angle of the best-fit rotation of its nodes about their centroid.
@@ -85,6 +102,9 @@ def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float
             "exact_m": sliding_distance(theta_deg, phi_deg, sim.state.time),
             "frictionless_m": sliding_distance(theta_deg, 0.0, sim.state.time),
             "rotation_deg": rotation, "steps": sim.state.step, "dt_s": sim.dt,
+            "triangle_dt_s": sim.triangle_dt, "n_block_triangles": int(len(block) // 3),
+            "element_damping": element_damping, "wall_s": wall,
+            "viscous_dissipation_J_per_m": float(row.get("viscous_dissipation", 0.0)),
             "friction_work_J_per_m": float(row.get("friction", 0.0)),
             "balance_error_relative": float(row.get("balance_error_relative", float("nan")))}
 
@@ -96,10 +116,15 @@ def main(argv=None):
     parser.add_argument("--width", type=float, default=1.0)
     parser.add_argument("--height", type=float, default=1.0)
     parser.add_argument("--t-end", type=float, default=1.0)
+    parser.add_argument("--size", type=float, default=None, help="element size [m] (default: half the block)")
+    parser.add_argument("--element-damping", type=float, default=DEFAULT_ELEMENT_DAMPING,
+                        help="fraction of critical viscosity of each triangle's highest mode (0: undamped; "
+                             f"default {DEFAULT_ELEMENT_DAMPING})")
     parser.add_argument("--out", type=Path, default=Path("runs/incline"))
     parser.add_argument("--max-steps", type=int, default=None, help="unused: the run lasts --t-end")
     args = parser.parse_args(argv)
-    r = run(args.theta, args.phi, args.t_end, args.width, args.height, out_dir=args.out)
+    r = run(args.theta, args.phi, args.t_end, args.width, args.height, out_dir=args.out, size=args.size,
+            element_damping=args.element_damping)
     print(json.dumps(r, indent=1))
     (args.out / "summary.json").write_text(json.dumps(r, indent=1))
 

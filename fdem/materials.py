@@ -229,6 +229,57 @@ def triangle_critical_dt(x0: np.ndarray, triangles: np.ndarray, lam, mu, density
     return damped_critical_dt(omega, rate / (2.0 * omega))
 
 
+# --------------------------------------------------------------------------- element damping
+def critical_viscosity_equilateral(altitude, lam, mu, density):
+    """Viscosity [Pa s] that critically damps the highest mode of an equilateral CST.
+
+    ``eta_crit = (4/3) h sqrt(rho (lambda + mu))`` with ``h`` the altitude [m], ``lambda``,
+    ``mu`` the 2D Lame constants [Pa], ``rho`` [kg/m^3]. Derivation: the shape-function
+    gradients of an equilateral triangle have length ``1/h`` at 120 degrees, so
+    ``G = B_v B_v^T = (3 / (2 h^2)) diag(1, 1, 2)``; with lumped masses ``rho A0 / 3`` the
+    highest mode is the uniform dilatation, ``omega_max^2 = 9 (lambda + mu) / (rho h^2)``, and
+    the viscous law ``S_v = eta dE/dt`` (Voigt ``C_v = eta diag(1, 1, 1/2)``) damps it at the
+    rate ``c = 9 eta / (2 rho h^2)`` with the same mode shape (no modal coupling). Critical
+    damping ``c = 2 omega_max`` gives the formula. Plane strain, ``nu = 0.25``:
+    ``eta_crit = 1.193 h sqrt(E rho)``, so Munjiza's (2004, sec. 4.2) ``2 h sqrt(E rho)`` is
+    1.68 times critical. Belytschko et al. (2014, sec. 6.3) for modal damping ratios.
+    """
+    return 4.0 / 3.0 * np.asarray(altitude) * np.sqrt(np.asarray(density) * (np.asarray(lam) + np.asarray(mu)))
+
+
+def critical_viscosity(x0: np.ndarray, triangles: np.ndarray, lam, mu, density) -> np.ndarray:
+    """(n_tri,) viscosity ``eta_crit`` [Pa s] that critically damps each free triangle's highest mode.
+
+    Highest mode of ``M^-1 K`` (lumped ``M = (rho A0 / 3) I``, ``K = A0 B_v^T C B_v``): the
+    displacement ``u = B_v^T w`` with ``w = C^1/2 y``, ``y`` the top eigenvector of
+    ``C^1/2 G C^1/2``, ``G = B_v B_v^T``; ``omega_max^2 = (3 / rho) lambda_max``. Its viscous
+    rate per unit ``eta`` is the Rayleigh quotient ``c_1 = (3 / rho) (w^T G D G w) / (w^T G w)``
+    with ``D = diag(1, 1, 1/2)`` (the Voigt matrix of ``S_v = eta dE/dt`` for ``eta = 1``).
+    Critical damping of that mode: ``eta_crit = 2 omega_max / c_1``. Exact (the mode is also a
+    mode of the damping) for the equilateral triangle, where it equals
+    :func:`critical_viscosity_equilateral`; for other shapes the damping couples modes weakly
+    and the value is the modal (Rayleigh-quotient) estimate. ``lam``, ``mu``, ``density`` are
+    scalars or (n_tri,) arrays [Pa, Pa, kg/m^3].
+    """
+    inv_dm, _ = triangle_shape_gradients(x0, triangles)
+    G = _voigt_gram(inv_dm)
+    n = len(triangles)
+    lam, mu, rho = (np.broadcast_to(np.asarray(a, dtype=float), (n,)) for a in (lam, mu, density))
+    C = np.zeros((n, 3, 3))
+    C[:, 0, 0] = C[:, 1, 1] = lam + 2.0 * mu
+    C[:, 0, 1] = C[:, 1, 0] = lam
+    C[:, 2, 2] = mu
+    wc, qc = np.linalg.eigh(C)
+    c_half = np.einsum("nij,nj,nkj->nik", qc, np.sqrt(wc), qc)
+    w, q = np.linalg.eigh(c_half @ G @ c_half)
+    y = q[:, :, -1]
+    omega = np.sqrt(3.0 / rho * w[:, -1])
+    gw = np.einsum("nij,nj->ni", G, np.einsum("nij,nj->ni", c_half, y))
+    D = np.array([1.0, 1.0, 0.5])
+    c1 = 3.0 / rho * (gw * gw * D).sum(1) / np.einsum("ni,ni->n", np.einsum("nij,nj->ni", c_half, y), gw)
+    return 2.0 * omega / c1
+
+
 # --------------------------------------------------------------------------- material
 @dataclass(frozen=True)
 class ElasticMaterial:
@@ -256,11 +307,19 @@ class ElasticMaterial:
     plane: str = PLANE_STRAIN
 
     def __post_init__(self):
+        for name in ("young", "poisson", "density", "viscosity"):
+            value = getattr(self, name)
+            try:
+                finite = bool(np.isfinite(float(value)))
+            except (TypeError, ValueError):
+                raise ValueError(f"ElasticMaterial: {name} must be a number, got {value!r}") from None
+            if not finite:
+                raise ValueError(f"ElasticMaterial: {name} must be finite, got {value!r}")
         _check_elastic(self.young, self.poisson)
         if not self.density > 0:
-            raise ValueError(f"density must be positive, got {self.density}")
-        if self.viscosity < 0:
-            raise ValueError(f"viscosity must be >= 0, got {self.viscosity}")
+            raise ValueError(f"ElasticMaterial: density must be positive, got {self.density!r}")
+        if not self.viscosity >= 0:
+            raise ValueError(f"ElasticMaterial: viscosity must be >= 0, got {self.viscosity!r}")
         plane_lame_constants(self.young, self.poisson, self.plane)
 
     @property

@@ -256,7 +256,7 @@ class Simulation:
         self.f_external = np.ascontiguousarray(model.external_force, dtype=np.float64)
         self.use_external = model.has_external_force
         self.gravity = model.gravity.astype(float).copy()
-        self.use_viscous = bool(np.any(model.property_array("viscosity") > 0))
+        self.use_viscous = bool(np.any(model.viscosity_array() > 0))
         self.exploded = model.is_exploded
         if not self.exploded:
             self._csr = model.node_corner_csr()
