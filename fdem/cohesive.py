@@ -28,6 +28,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .interfaces import Interfaces
 from .kernels import cracks as K
 from .topology import INTACT, Topology
 
@@ -203,12 +204,14 @@ class Heterogeneity:
     def __post_init__(self) -> None:
         if self.distribution not in ("none", "normal", "weibull"):
             raise ValueError(f"heterogeneity distribution must be 'none', 'normal' or 'weibull', got {self.distribution!r}")
-        if self.cov < 0 or not math.isfinite(self.cov):
-            raise ValueError(f"heterogeneity cov must be >= 0, got {self.cov}")
-        if self.weibull_modulus <= 0:
-            raise ValueError(f"Weibull modulus must be positive, got {self.weibull_modulus}")
-        if not 0 < self.min_factor <= 1:
+        if not (math.isfinite(self.cov) and self.cov >= 0):
+            raise ValueError(f"heterogeneity cov must be finite and >= 0, got {self.cov}")
+        if not (math.isfinite(self.weibull_modulus) and self.weibull_modulus > 0):
+            raise ValueError(f"heterogeneity weibull_modulus must be positive and finite, got {self.weibull_modulus}")
+        if not (math.isfinite(self.min_factor) and 0 < self.min_factor <= 1):
             raise ValueError(f"heterogeneity min_factor must be in (0, 1], got {self.min_factor}")
+        if self.seed is not None and not isinstance(self.seed, (int, np.integer)):
+            raise ValueError(f"heterogeneity seed must be an integer or None, got {self.seed!r}")
 
     def draw(self, tag: np.ndarray) -> np.ndarray:
         """(n,) multipliers for elements with joint-set tags ``tag``."""
@@ -250,9 +253,11 @@ class CrackSet:
     Parameters
     ----------
     topology : Topology
-    property_sets : mapping ``tag -> CrackProperties`` (or a sequence indexed by tag); tag 0
-        is intact rock, ``j >= 1`` DFN joint set ``j``. Every tag present in
-        ``topology.crack_tag`` needs a set.
+    property_sets : :class:`fdem.interfaces.Interfaces`, or a mapping ``tag -> CrackProperties``
+        (or a sequence indexed by tag) wrapped into one; tag 0 is intact rock, ``j >= 1`` DFN
+        joint set ``j``. Every tag present in ``topology.crack_tag`` needs a set. The
+        strength-reduction factor lives there (``cracks.interfaces.set_reduction(F)``) and
+        reaches contact too.
     heterogeneity : Heterogeneity or None
     scheme : ``"colour"`` (elements coloured so each colour scatters race-free) or
         ``"gather"`` (per-element forces stored, then gathered per node through a
@@ -283,14 +288,8 @@ class CrackSet:
         self.topology = topology
         self.scheme = scheme
         self.parallel_min = int(parallel_min)
-        if not isinstance(property_sets, Mapping):
-            property_sets = dict(enumerate(property_sets))
-        self.property_sets: dict[int, CrackProperties] = dict(property_sets)
-        for tag, p in self.property_sets.items():
-            if not isinstance(tag, (int, np.integer)) or tag < 0:
-                raise ValueError(f"property-set keys are joint-set tags (int >= 0), got {tag!r}")
-            if not isinstance(p, CrackProperties):
-                raise ValueError(f"property set for tag {tag} must be a CrackProperties, got {type(p).__name__}")
+        self.interfaces = Interfaces.of(property_sets)
+        self.property_sets: dict[int, CrackProperties] = self.interfaces.property_sets
         self.heterogeneity = heterogeneity or Heterogeneity()
 
         tag = np.asarray(topology.crack_tag, dtype=np.int32)
@@ -310,7 +309,6 @@ class CrackSet:
         self.length0 = np.asarray(topology.crack_length0, dtype=np.float64)
         self.nodes = np.ascontiguousarray(topology.crack_nodes, dtype=np.int32)
         self.strength_multiplier = self.heterogeneity.draw(tag)
-        self._strength_factor = 1.0
 
         # Small property table indexed by tag: [f_t, c, tan(phi), G_I, G_II, kind, tan(phi_res)].
         n_tags = int(max(self.property_sets)) + 1 if self.property_sets else 1
@@ -332,7 +330,7 @@ class CrackSet:
             area = topology.triangle_area0
             h = 2.0 * area[topology.crack_triangles] / self.length0[:, None]
             self.kc = 3.0 * contact_penalty * (1.0 / h[:, 0] + 1.0 / h[:, 1])
-        self._check_snap_back(1.0)
+        self._check_snap_back(self.interfaces.reduction)
 
         # Internal element order: colour-major for the colour scheme, so that every colour
         # pass streams its rows contiguously; identity for the gather scheme. Public arrays
@@ -350,10 +348,12 @@ class CrackSet:
         self._nodes = np.ascontiguousarray(self.nodes[self._perm])
 
         self._const = np.zeros((n, K.N_CONST))
-        self._fill_constants()
         self._status = np.zeros(n, dtype=np.int8)
         self._state = np.zeros((n, K.N_STATE))
         self._diss = np.zeros((n, 3))
+        self._offset = np.zeros((n, 4))
+        self._fill_constants()
+        self.interfaces.subscribe(self._fill_constants, check=self._check_snap_back)
         self.broken = np.zeros(n, dtype=bool)
         self.failure_mode = np.zeros(n, dtype=np.int8)  # 0 intact, 1 mode I, 2 mode II, 3 mixed
         self._broke_flag = np.zeros(n, dtype=np.int8)
@@ -380,19 +380,21 @@ class CrackSet:
         self._set_active(np.arange(n, dtype=np.int64))
 
     # ------------------------------------------------------------------ constants
-    def _element_strengths(self, factor: float) -> tuple[np.ndarray, ...]:
+    def _element_strengths(self, reduction: float) -> tuple[np.ndarray, ...]:
+        """Per-element ``f_t, c, tan(phi), G_I, G_II, kind`` under the reduction factor ``F``."""
         P = self.props[self.tag]
         h = self.strength_multiplier
-        return P[:, 0] * h * factor, P[:, 1] * h * factor, P[:, 2] * factor, P[:, 3], P[:, 4], P[:, 5]
+        ft_factor = 1.0 / reduction if self.interfaces.reduce_tensile else 1.0
+        return P[:, 0] * h * ft_factor, P[:, 1] * h / reduction, P[:, 2] / reduction, P[:, 3], P[:, 4], P[:, 5]
 
-    def _check_snap_back(self, factor: float) -> None:
+    def _check_snap_back(self, reduction: float) -> None:
         """G must exceed the elastic energy at the peak, or the softening branch snaps back.
 
         Mode I: ``G_I > f_t^2 / (2 k_n)`` (so that ``o_r > o_p``). Mode II (plastic cohesive
         slip, slip-controlled): ``G_II > c^2 Zbar max|z'| / k_t`` (``= c^2/(2 k_t)`` for linear
         softening). Checked with the strongest element and the softest penalty of each set.
         """
-        ft, c, _, GI, GII, kind = self._element_strengths(factor)
+        ft, c, _, GI, GII, kind = self._element_strengths(reduction)
         for t, p in self.property_sets.items():
             sel = np.flatnonzero(self.tag == t)
             if sel.size == 0:
@@ -419,7 +421,11 @@ class CrackSet:
     _elastic_only = False
 
     def _fill_constants(self) -> None:
-        ft, c, tanphi, GI, GII, kind = self._element_strengths(self._strength_factor)
+        """Write the per-element constant rows for the current reduction factor and hold state.
+
+        Damaged ends keep their secant stiffness (:func:`fdem.kernels.cracks.remap_damage`), so
+        the change neither creates nor removes stored energy."""
+        ft, c, tanphi, GI, GII, kind = self._element_strengths(self.interfaces.reduction)
         w = 0.5 * self.length0
         zbar = np.where(kind == K.LINEAR, softening_integral("linear"), softening_integral("munjiza"))
         dO = (GI - ft ** 2 / (2.0 * self.kn)) / (ft * zbar)
@@ -438,39 +444,91 @@ class CrackSet:
             # Peak opening and cohesion out of reach: every update takes the elastic fast path.
             C[:, 2] = ELASTIC_ONLY_LIMIT
             C[:, 3] = ELASTIC_ONLY_LIMIT
-        self._const[:] = C[self._perm]
+        new = np.ascontiguousarray(C[self._perm])
+        if not hasattr(self, "_active"):  # construction: nothing to carry over
+            self._const[:] = new
+            return
+        if self._status.any():
+            K.remap_damage(self._const, new, self._state, self._status, self._active)
+        self._const[:] = new
+        # Ends now outside the envelope soften or slip at once, at fixed positions, with the
+        # released stored energy booked exactly (there is no work without motion).
+        x = self._x_last if self._x_last is not None else self.topology.x0
+        K.project_to_envelope(np.ascontiguousarray(x, dtype=np.float64), self._nodes, self._const, self._status,
+                              self._state, self._diss, self._offset, self._active)
 
     def hold_elastic(self, on: bool = True) -> None:
         """Keep every element elastic (no damage, no breakage, no shear yield) while ``on``.
 
         For geostatic initialisation: gravity is switched on and damped to equilibrium with the
         crack elements acting as elastic penalties, as in the paper's initial FEM stage; then
-        ``hold_elastic(False)`` restores the strengths (times the current strength factor).
-        Damage already done is kept.
+        ``hold_elastic(False)`` restores the strengths (divided by the current reduction factor).
+        Damage already done is kept at its secant stiffness: holding or releasing creates no energy.
         """
         self._elastic_only = bool(on)
         self._fill_constants()
 
     def scale_strength(self, factor: float) -> None:
-        """Set ``f_t``, ``c`` and ``tan(phi)`` (and the residual friction) to ``factor`` times
-        their initial values (``factor = 1/SRF``; absolute, not cumulative). Fracture energies
-        and penalties are kept; damage already done stays. No recompilation: only the numbers
-        in the per-element constant rows change."""
+        """Shorthand for ``interfaces.set_reduction(1 / factor)``: ``c``, ``tan(phi)``, the
+        residual and contact friction (and ``f_t`` by default) become ``factor`` times their
+        initial values (absolute, not cumulative). Fracture energies and penalties are kept;
+        damage already done stays at its secant stiffness. Only the numbers in the
+        per-element constant rows change."""
         if not (math.isfinite(factor) and factor > 0):
             raise ValueError(f"strength factor must be positive and finite, got {factor}")
-        self._check_snap_back(factor)
-        self._strength_factor = float(factor)
-        self._fill_constants()
+        self.interfaces.set_reduction(1.0 / factor)
 
     @property
     def strength_factor(self) -> float:
-        return self._strength_factor
+        """``1 / F``, the multiplier on ``c`` and ``tan(phi)`` (see :mod:`fdem.interfaces`)."""
+        return self.interfaces.strength_factor
 
     @property
     def residual_friction(self) -> np.ndarray:
-        """(n,) friction coefficient ``tan(phi_res)`` (times the strength factor) that contact
-        should use on the faces of each broken element."""
-        return self.props[self.tag, 6] * self._strength_factor
+        """(n,) reduced friction coefficient ``tan(phi_res) / F`` of the faces of each element."""
+        return self.interfaces.residual_mu(self.tag)
+
+    # ------------------------------------------------------------------ pre-load
+    def set_preload(self, end_forces: np.ndarray) -> None:
+        """Pre-load the elements: ``end_forces`` (n, 2, 2) [N/m] is the force on the A node of
+        each end (end 0: nodes A_p/B_p, end 1: A_q/B_q; topology order) at zero separation.
+
+        Stored as separation offsets in the element frame at the reference positions:
+        ``o_off = (F.n) / K`` (``K = K_n w`` in tension, ``K_c w`` in compression) and
+        ``s_off = (F.t) / (K_t w)``, ``w = L0 / 2``, so the law gives ``F`` at zero separation
+        and every later change of separation adds to it (the crack-element counterpart of the
+        triangles' initial stress). Pre-loads above the strength soften or slide the element
+        at its first update. See :func:`fdem.geostatic.geostatic_start`.
+        """
+        F = np.asarray(end_forces, dtype=np.float64)
+        n = self.n_cracks
+        if F.shape != (n, 2, 2):
+            raise ValueError(f"end_forces must have shape ({n}, 2, 2), got {F.shape}")
+        bad = np.flatnonzero(~np.isfinite(F).all(axis=(1, 2)))
+        if bad.size:
+            c = int(bad[0])
+            mid = self.topology.x0[self.nodes[c, :2]].mean(axis=0)
+            raise ValueError(f"end_forces of crack element {c} at ({mid[0]:.6g}, {mid[1]:.6g}) are not finite "
+                             f"({bad.size} element(s) in all)")
+        x = self.topology.x0
+        cn = self.nodes
+        m0 = 0.5 * (x[cn[:, 0]] + x[cn[:, 3]])
+        m1 = 0.5 * (x[cn[:, 1]] + x[cn[:, 2]])
+        t = (m1 - m0) / np.maximum(np.linalg.norm(m1 - m0, axis=1, keepdims=True), 1e-300)
+        nrm = np.column_stack([t[:, 1], -t[:, 0]])
+        w = 0.5 * self.length0
+        off = np.zeros((n, 4))
+        for e in range(2):
+            fn = (F[:, e] * nrm).sum(axis=1)
+            ft = (F[:, e] * t).sum(axis=1)
+            off[:, 2 * e] = fn / (np.where(fn > 0.0, self.kn, self.kc) * w)
+            off[:, 2 * e + 1] = ft / (self.kt * w)
+        self._offset[:] = off[self._perm]
+
+    @property
+    def preload_offsets(self) -> np.ndarray:
+        """(n, 4) separation offsets ``[o0, s0, o1, s1]`` [m] (topology order; zero unless pre-loaded)."""
+        return self._offset[self._inv].copy()
 
     # ------------------------------------------------------------------ active list
     def _set_active(self, alive: np.ndarray) -> None:
@@ -518,13 +576,13 @@ class CrackSet:
             return
         if self._active.size < self.parallel_min:
             nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                       self._active, self._broke_flag)
+                                       self._offset, self._active, self._broke_flag)
         elif self.scheme == "colour":
             nb = K.crack_forces_coloured(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                         self._active, self._colour_ptr, self._broke_flag)
+                                         self._offset, self._active, self._colour_ptr, self._broke_flag)
         else:
             nb = K.crack_forces_store(x, self._nodes, self._const, self._status, self._state, self._diss,
-                                      self._active, self._fe, self._broke_flag)
+                                      self._offset, self._active, self._fe, self._broke_flag)
             K.gather_node_forces(f, self._node_list, self._node_map, self._fe)
         if nb:
             self._register_breaks(x, step)
@@ -538,7 +596,7 @@ class CrackSet:
         topo_ids = self._perm[ids]
         self.broken[topo_ids] = True
         # Elastic energy still held at breakage (e.g. friction stress, closure) is released.
-        self.released += K.crack_elastic_energy(x, self._nodes, self._const, self._state, ids)
+        self.released += K.crack_elastic_energy(x, self._nodes, self._const, self._state, self._offset, ids)
         mid = 0.25 * x[self._nodes[ids]].sum(axis=1)
         wI, wII = self._diss[ids, 0], self._diss[ids, 1]
         # Mode from the elliptical damage at failure: share of xi_II^2 in D^2, averaged over ends.
@@ -613,7 +671,8 @@ class CrackSet:
         """
         el = 0.0
         if self._x_last is not None and self._active.size:
-            el = float(K.crack_elastic_energy(self._x_last, self._nodes, self._const, self._state, self._active))
+            el = float(K.crack_elastic_energy(self._x_last, self._nodes, self._const, self._state, self._offset,
+                                              self._active))
         return {
             "crack_elastic": el,
             "fracture": float(self._diss[:, 0].sum() + self._diss[:, 1].sum()),

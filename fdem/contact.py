@@ -43,6 +43,17 @@ Use
     # when crack elements break:
     contact.activate_cracks(broken_ids, friction_angle=joint_phi_of_those_cracks)
     ledger.update(contact.energy_terms())
+
+Friction belongs to the interface
+---------------------------------
+A pair of triangles across a broken crack element uses that element's residual friction
+(its joint set's ``phi_res``, from :class:`fdem.interfaces.Interfaces`); any other pair uses
+``min(mu_i, mu_j)``, where a triangle's ``mu`` is the lowest friction of the faces it exposes
+(its external faces: ``friction_angle``; its broken crack elements: their residual friction).
+Activating a broken element never raises the friction of a face broken earlier. All of these
+are base values: the pair friction is ``mu_base / F`` with the current strength-reduction
+factor ``F`` (the crack set's :class:`~fdem.interfaces.Interfaces`, or
+:meth:`ContactSet.set_reduction` without crack elements), whatever broke when.
 """
 from __future__ import annotations
 
@@ -165,8 +176,10 @@ class ContactSet:
     penalty : float
         Normal penalty ``p`` [Pa] (``p = alpha E``, ``alpha`` about 10 to 100; verification.md).
     friction_angle : float or (n_tri,) array
-        Friction angle ``phi`` [deg] in ``[0, 90)``, per triangle; a pair uses
-        ``mu = tan(min(phi_i, phi_j))``. 0 switches friction off (the branch is skipped).
+        Friction angle ``phi`` [deg] in ``[0, 90)`` of the external faces, per triangle (see
+        "Friction belongs to the interface" in the module docstring). 0 on every face that can
+        touch switches friction off (the branch is skipped). Divided (as ``tan``) by the
+        strength-reduction factor like every interface friction.
     tangential_ratio : float
         Tangential stiffness of a pair as a fraction of the normal stiffness of a face-to-face
         contact, ``k_t = tangential_ratio * 6 p L / h`` with ``L`` the longest edge and ``h``
@@ -193,8 +206,9 @@ class ContactSet:
         Raise ``ValueError`` if bodies overlap in the reference state (default True).
     cracks : CrackSet, optional
         The crack elements of the same topology. Elements it breaks (``cracks.newly_broken``)
-        are handed to contact at the start of the next :meth:`add_forces`, with their residual
-        friction ``cracks.residual_friction``; register the crack set before the contact set.
+        are handed to contact at the start of the next :meth:`add_forces`, with the residual
+        friction of their joint set (``cracks.interfaces``), reduced by the same factor ``F``
+        as the crack elements; register the crack set before the contact set.
 
     The solver calls :meth:`add_forces`, :meth:`energy_terms` and :meth:`stable_dt`.
     """
@@ -212,7 +226,14 @@ class ContactSet:
         if not np.isfinite(tangential_ratio) or tangential_ratio <= 0.0:
             raise ValueError(f"tangential_ratio must be positive and finite, got {tangential_ratio!r}")
         self.tangential_ratio = tangential_ratio
-        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")
+        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")  # base face friction
+        self._reduction = 1.0  # used when there is no crack set (else its interfaces hold F)
+        # broken crack element between two triangles: sorted keys i * n_tri + j (i < j)
+        ct = np.sort(np.asarray(topology.crack_triangles, dtype=np.int64), axis=1)
+        ckeys = ct[:, 0] * n_tri + ct[:, 1]
+        self._crack_order = np.argsort(ckeys, kind="stable")
+        self._crack_keys = ckeys[self._crack_order]
+        self._crack_mu = np.zeros(topology.n_cracks)  # base residual friction of broken elements
         damping_ratio = float(damping_ratio)
         if not np.isfinite(damping_ratio) or damping_ratio < 0.0:
             raise ValueError(f"damping_ratio must be >= 0, got {damping_ratio!r}")
@@ -259,6 +280,7 @@ class ContactSet:
         self._keys = np.zeros(0, np.int64)
         self._history = np.zeros((0, kc.N_HIST))
         self._mu_pair = np.zeros(0)
+        self._mu_base_pair = np.zeros(0)
         self._damp_pair = np.zeros(0)
         self._pair_i = np.zeros(0, np.int64)       # contiguous copies of the pair columns
         self._pair_j = np.zeros(0, np.int64)
@@ -284,8 +306,9 @@ class ContactSet:
                 raise ValueError("contact and crack elements must share one topology")
             already = np.flatnonzero(cracks.broken)
             if already.size:
-                self.activate_cracks(already, mu=cracks.residual_friction[already])
+                self.activate_cracks(already)
             self._watch_inelastic()
+            cracks.interfaces.subscribe(self._refresh_pair_friction)
 
     # ------------------------------------------------------------------ state
     @property
@@ -318,10 +341,12 @@ class ContactSet:
         """Hand broken crack elements to contact.
 
         Triangles A and B of each crack become contactors, and their bond is dropped so that they
-        can push each other (they could not while the crack element was intact). The friction
-        of both triangles is set to the crack's joint property when given, either as
-        ``friction_angle`` [deg] or as ``mu = tan(phi)`` (e.g. ``CrackSet.residual_friction``),
-        a scalar or one value per crack. Triggers a re-search on the next :meth:`add_forces`.
+        can push each other (they could not while the crack element was intact). The base
+        (unreduced) friction of the broken faces is ``friction_angle`` [deg] or ``mu = tan(phi)``
+        when given (a scalar or one value per crack), else the residual friction of the crack's
+        joint set from the crack set's interfaces, else the external-face friction of the two
+        triangles. Both triangles' face friction becomes the lower of what they had and this
+        (see the module docstring). Triggers a re-search on the next :meth:`add_forces`.
         """
         ids = np.atleast_1d(np.asarray(crack_ids, dtype=np.int64))
         if ids.size == 0:
@@ -330,9 +355,14 @@ class ContactSet:
             raise ValueError(f"crack ids must lie in [0, {self.topology.n_cracks}), got {ids.min()}..{ids.max()}")
         tri = self.topology.crack_triangles[ids]
         coef = _mu_from(friction_angle, mu, ids.size, "crack")
-        if coef is not None:
-            self.mu_tri[tri[:, 0]] = coef
-            self.mu_tri[tri[:, 1]] = coef
+        if coef is None:
+            if self.cracks is not None:
+                coef = self.cracks.interfaces.tan_phi_res_base[self.cracks.tag[ids]]
+            else:
+                coef = np.minimum(self.mu_tri[tri[:, 0]], self.mu_tri[tri[:, 1]])
+        self._crack_mu[ids] = coef
+        np.minimum.at(self.mu_tri, tri[:, 0], coef)
+        np.minimum.at(self.mu_tri, tri[:, 1], coef)
         self._broken[ids] = True
         self._any_broken = True
         cn = self.topology.crack_nodes[ids]
@@ -367,16 +397,53 @@ class ContactSet:
             self.add_contactors(self.topology.crack_triangles[self.cracks.inelastic()].ravel())
 
     def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
-        """Change the friction of ``triangles`` (default all), as ``friction_angle`` [deg] or
-        ``mu = tan(phi)``, scalar or one per triangle (strength reduction, new joint properties);
-        the pairs use it from the next step, their slip history is kept."""
+        """Set the base face friction of ``triangles`` (default all), as ``friction_angle`` [deg]
+        or ``mu = tan(phi)``, scalar or one per triangle (new joint or surface properties; a
+        strength reduction goes through :meth:`set_reduction` instead). Pairs across a broken
+        crack element keep that element's friction. The pairs use it from the next step, their
+        slip history is kept."""
         tris = np.arange(self.topology.n_triangles) if triangles is None else np.asarray(triangles, np.int64)
         coef = _mu_from(friction_angle, mu, tris.size, "triangle")
         if coef is None:
             raise ValueError("set_friction needs friction_angle or mu")
         self.mu_tri[tris] = coef
+        self._refresh_pair_friction()
+
+    @property
+    def reduction(self) -> float:
+        """The strength-reduction factor ``F`` dividing every friction coefficient."""
+        return self.cracks.interfaces.reduction if self.cracks is not None else self._reduction
+
+    def set_reduction(self, factor: float) -> None:
+        """Set ``F`` (through the crack set's interfaces when there is one, so that crack
+        elements and contact always share it)."""
+        if self.cracks is not None:
+            self.cracks.interfaces.set_reduction(factor)
+            return
+        factor = float(factor)
+        if not (np.isfinite(factor) and factor > 0.0):
+            raise ValueError(f"strength-reduction factor F must be positive and finite, got {factor!r}")
+        self._reduction = factor
+        self._refresh_pair_friction()
+
+    def _pair_base_friction(self, pairs: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """Base friction of each pair: the broken crack element between them, else the lower
+        face friction of the two triangles."""
+        base = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
+        if self._any_broken and len(keys) and len(self._crack_keys):
+            pos = np.minimum(np.searchsorted(self._crack_keys, keys), len(self._crack_keys) - 1)
+            hit = np.flatnonzero(self._crack_keys[pos] == keys)
+            crack = self._crack_order[pos[hit]]
+            across = self._broken[crack]
+            base[hit[across]] = self._crack_mu[crack[across]]
+        return base
+
+    def _refresh_pair_friction(self) -> None:
         if len(self.pairs):
-            self._mu_pair = np.minimum(self.mu_tri[self.pairs[:, 0]], self.mu_tri[self.pairs[:, 1]])
+            self._mu_base_pair = self._pair_base_friction(self.pairs, self._keys)
+        else:
+            self._mu_base_pair = np.zeros(0)
+        self._mu_pair = self._mu_base_pair / self.reduction
 
     def set_friction_angle(self, friction_angle, triangles: np.ndarray | None = None) -> None:
         """Shorthand for :meth:`set_friction` with angles [deg]."""
@@ -395,7 +462,7 @@ class ContactSet:
         touching = np.empty(len(pairs), np.uint8)
         kc.carry_history(self._keys, self._history, keys, history, touching)
         self.pairs, self._keys, self._history = pairs, keys, history
-        self._mu_pair = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
+        self._refresh_pair_friction()
         self._kt_pair = np.minimum(self._kt_tri[pairs[:, 0]], self._kt_tri[pairs[:, 1]])
         if self.damping_ratio > 0.0:
             mi, mj = self.mass_tri[pairs[:, 0]], self.mass_tri[pairs[:, 1]]
@@ -430,7 +497,7 @@ class ContactSet:
             # Faces of crack elements broken by this step's crack pass become contact faces.
             ids = self.cracks.newly_broken
             if ids.size:
-                self.activate_cracks(ids, mu=self.cracks.residual_friction[ids])
+                self.activate_cracks(ids)
             if step % INELASTIC_CHECK_EVERY == 0:
                 self._watch_inelastic()
         if self.dormant:

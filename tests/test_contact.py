@@ -256,7 +256,9 @@ def test_intact_cracks_exclude_and_broken_cracks_activate_pairs():
     assert cs.energy_terms()["contact_elastic"] > 0.0
 
 
-def test_broken_joint_friction_and_strength_reduction():
+def test_broken_joint_friction_belongs_to_the_interface_and_is_reduced():
+    """A pair across a broken crack element uses that element's friction; activating another
+    element never raises it; the reduction factor F divides every friction, whenever it broke."""
     topo = build_topology(_join(structured_rectangle(2, 1, 2.0, 1.0),
                                 structured_rectangle(1, 1, 1.0, 1.0, origin=(10.0, 0.0))))
     cs = ContactSet(topo, penalty=1.0, friction_angle=40.0)
@@ -265,17 +267,25 @@ def test_broken_joint_friction_and_strength_reduction():
         cs.activate_cracks([1], friction_angle=[95.0])
     cs.activate_cracks([1], friction_angle=[25.0])
     cs.search(topo.x0)
-    q = {tuple(p): k for k, p in enumerate(cs.pairs.tolist())}[(min(a, b), max(a, b))]
-    assert cs._mu_pair[q] == pytest.approx(np.tan(np.radians(25.0)))
-    cs.set_friction_angle(np.degrees(np.arctan(np.tan(np.radians(25.0)) / 1.5)))   # F = 1.5
-    assert cs._mu_pair[q] == pytest.approx(np.tan(np.radians(25.0)) / 1.5)
-    assert np.allclose(cs.mu_tri, np.tan(np.radians(25.0)) / 1.5)
-    cs.activate_cracks([0], mu=0.3)                  # e.g. CrackSet.residual_friction
-    assert cs.mu_tri[topo.crack_triangles[0]].tolist() == [0.3, 0.3]
+    pair_index = lambda: {tuple(p): k for k, p in enumerate(cs.pairs.tolist())}
+    q = pair_index()[(min(a, b), max(a, b))]
+    t25, t35, t40 = (np.tan(np.radians(d)) for d in (25.0, 35.0, 40.0))
+    assert cs._mu_pair[q] == pytest.approx(t25)
+    cs.set_reduction(1.5)
+    assert cs._mu_pair[q] == pytest.approx(t25 / 1.5)
+    # a later breakage with higher friction neither overwrites nor escapes the reduction
+    cs.activate_cracks([0], friction_angle=[35.0])
+    cs.search(topo.x0)
+    idx = pair_index()
+    assert cs._mu_pair[idx[(min(a, b), max(a, b))]] == pytest.approx(t25 / 1.5)
+    c, d = topo.crack_triangles[0]
+    assert cs._mu_pair[idx[(min(c, d), max(c, d))]] == pytest.approx(t35 / 1.5)
+    # a triangle exposes its lowest-friction face to pairs not across a broken element
+    assert cs.mu_tri[a] == pytest.approx(min(t25, t40)) and cs.mu_tri[b] <= t25 + 1e-15
     with pytest.raises(ValueError, match="mu"):
         cs.activate_cracks([0], mu=-0.1)
-    cs.set_friction(mu=0.0)                          # frictionless: the branch is skipped
-    assert not cs._mu_pair.any()
+    with pytest.raises(ValueError, match="positive"):
+        cs.set_reduction(0.0)
 
 
 def test_single_intact_body_is_dormant():

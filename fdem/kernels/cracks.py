@@ -37,6 +37,11 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``diss : (n, 3) float64``
     Energy dissipated by each element [J per metre of thickness]: mode-I (normal damage),
     mode-II (cohesive part of the shear strength), friction inside the intact element.
+``offset : (n, 4) float64``
+    ``[o0, s0, o1, s1]``: separation offsets [m] added to the measured opening and slip of end
+    0 and end 1. Zero by default; a geostatic start pre-loads the elements through them (the
+    law then gives the equilibrium traction at zero separation), as the triangles' initial
+    stress pre-loads the triangles.
 
 The law (per integration point, per unit area; Munjiza 2004 ch. 7; Munjiza, Andrews & White
 1999; Lisjak et al. 2014, elliptical mixed-mode interaction) is documented in
@@ -155,7 +160,9 @@ def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_d
             sec_old = softening(D, kind) * Ft / (op + D * dO)
         # Work of the traction over the step minus the change of stored energy, with the
         # opening at the start of the step estimated by the envelope point of D (exact for
-        # monotonic mode I, and for fixed opening): dW = (sec_old - sec) o_ref o / 2.
+        # monotonic mode I, and for fixed opening below it): dW = (sec_old - sec) o_ref o / 2.
+        # It matches the trapezoidal work of the central-difference ledger; a jump of the
+        # envelope at fixed opening (a strength change) is booked by project_to_envelope.
         oref = min(op + D * dO, opos)
         dWI = 0.5 * (sec_old - sec) * oref * opos
     att = abs(ttr)
@@ -171,12 +178,13 @@ def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_d
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def element_update(c, x, nodes, const, status, state, diss):
+def element_update(c, x, nodes, const, status, state, diss, offset):
     """One crack element: kinematics, the law at both ends, state update.
 
     Tangent ``t`` along the mid-line of the two faces, ``t = (m1 - m0)/|m1 - m0|`` with
     ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``; normal ``n = (t_y, -t_x)`` (A into B).
-    Separation at end 0: ``d0 = x3 - x0``, end 1: ``d1 = x2 - x1``; ``o = d.n``, ``s = d.t``.
+    Separation at end 0: ``d0 = x3 - x0``, end 1: ``d1 = x2 - x1``; ``o = d.n + o_off``,
+    ``s = d.t + s_off`` with the element's separation offsets ``offset[c]``.
 
     Returns ``(broke, F0x, F0y, F1x, F1y)``: ``F_i = sigma_i n + tau_i t`` [N/m] is the force on
     the A node of end ``i``; the B node gets ``-F_i``. ``broke`` is True when both ends reached
@@ -205,10 +213,10 @@ def element_update(c, x, nodes, const, status, state, diss):
     d0y = y3 - y0
     d1x = x2 - x1
     d1y = y2 - y1
-    o0 = d0x * nx + d0y * ny
-    s0 = d0x * tx + d0y * ty
-    o1 = d1x * nx + d1y * ny
-    s1 = d1x * tx + d1y * ty
+    o0 = d0x * nx + d0y * ny + offset[c, 0]
+    s0 = d0x * tx + d0y * ty + offset[c, 1]
+    o1 = d1x * nx + d1y * ny + offset[c, 2]
+    s1 = d1x * tx + d1y * ty + offset[c, 3]
 
     Kn = const[c, 0]
     Kt = const[c, 1]
@@ -255,10 +263,10 @@ def element_update(c, x, nodes, const, status, state, diss):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def update_and_scatter(c, x, f, nodes, const, status, state, diss, broke_flag):
+def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, broke_flag):
     """Update element ``c`` and add its forces to its four nodes (``+F_i`` on the A node of end
     ``i``, ``-F_i`` on the B node). Returns 1 if it broke (and sets ``broke_flag[c]``), else 0."""
-    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset)
     i0 = nodes[c, 0]
     i1 = nodes[c, 1]
     i2 = nodes[c, 2]
@@ -278,7 +286,7 @@ def update_and_scatter(c, x, f, nodes, const, status, state, diss, broke_flag):
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_coloured(x, f, nodes, const, status, state, diss, active, colour_ptr, broke_flag):
+def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, active, colour_ptr, broke_flag):
     """Add crack forces into ``f`` (n_nodes, 2) [N/m], colour by colour.
 
     ``active`` holds the live element ids grouped by colour, colour ``k`` in
@@ -289,22 +297,22 @@ def crack_forces_coloured(x, f, nodes, const, status, state, diss, active, colou
     nb = 0
     for k in range(colour_ptr.shape[0] - 1):
         for j in prange(colour_ptr[k], colour_ptr[k + 1]):
-            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, broke_flag)
+            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, broke_flag)
     return nb
 
 
 @njit(cache=True, fastmath=True)
-def crack_forces_serial(x, f, nodes, const, status, state, diss, active, broke_flag):
+def crack_forces_serial(x, f, nodes, const, status, state, diss, offset, active, broke_flag):
     """Serial version of :func:`crack_forces_coloured` for small active sets (no threading
     overhead; any element order is race-free on one thread)."""
     nb = 0
     for j in range(active.shape[0]):
-        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, broke_flag)
+        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, broke_flag)
     return nb
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_store(x, nodes, const, status, state, diss, active, fe, broke_flag):
+def crack_forces_store(x, nodes, const, status, state, diss, offset, active, fe, broke_flag):
     """Per-element pass of the store-and-gather scheme: ``fe[c] = [F0x, F0y, F1x, F1y]``.
 
     Returns the number of elements that broke (their ``fe`` row is zero from then on).
@@ -312,7 +320,7 @@ def crack_forces_store(x, nodes, const, status, state, diss, active, fe, broke_f
     nb = 0
     for j in prange(active.shape[0]):
         c = active[j]
-        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss)
+        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset)
         fe[c, 0] = F0x
         fe[c, 1] = F0y
         fe[c, 2] = F1x
@@ -371,7 +379,7 @@ def colour_elements(crack_triangles, n_tri):
 
 
 @njit(cache=True, fastmath=True)
-def crack_elastic_energy(x, nodes, const, state, active):
+def crack_elastic_energy(x, nodes, const, state, offset, active):
     """Elastic energy stored in the live elements [J/m]: per end
     ``sec o+^2/2 + Kc o-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)``."""
     e = 0.0
@@ -399,8 +407,8 @@ def crack_elastic_energy(x, nodes, const, state, active):
             else:
                 dx = x[i2, 0] - x[i1, 0]
                 dy = x[i2, 1] - x[i1, 1]
-            o = dx * ty - dy * tx
-            s = dx * tx + dy * ty
+            o = dx * ty - dy * tx + offset[c, 2 * end]
+            s = dx * tx + dy * ty + offset[c, 2 * end + 1]
             D = state[c, 3 * end]
             sec = Kn
             if D > 0.0:
@@ -433,3 +441,126 @@ def stable_dt_kernel(mass, nodes, const, active, n_nodes):
             if w2 > 0.0:
                 dt = min(dt, 2.0 / math.sqrt(w2))
     return dt
+
+
+@njit(cache=True, fastmath=True)
+def secant_stiffness(D, const_row):
+    """Secant normal stiffness ``sec(D) = z(D) F_t / (o_p + D (o_r - o_p))`` of an end with
+    damage ``D`` (``K_n`` at ``D = 0``, 0 at ``D >= 1``), from one constant row [N/m per end]."""
+    Kn = const_row[0]
+    if D <= 0.0:
+        return Kn
+    if D >= 1.0:
+        return 0.0
+    op = const_row[2]
+    signed_inv_dO = const_row[5]
+    kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
+    return softening(D, kind) * Kn * op / (op + D / abs(signed_inv_dO))
+
+
+@njit(cache=True)
+def remap_damage(old_const, new_const, state, status, active):
+    """Carry the damage of every damaged end over to new constants (a strength change).
+
+    The secant stiffness ``sec(D)`` sets the stored normal energy ``sec o^2 / 2``; a change of
+    strength changes ``sec`` at fixed ``D``. Each damaged end gets the damage ``D'`` with
+    ``sec_new(D') = sec_old(D)`` (``sec`` falls monotonically from ``K_n`` to 0 on [0, 1], solved
+    by bisection), so the change neither stores nor releases energy. If the current separation
+    lies beyond the new envelope, the next update of the law softens the end and books the
+    released energy as fracture dissipation. Plastic slip is kept; the shear spring energy
+    ``K_t (s - s_pl)^2 / 2`` does not depend on the strength. Fully damaged ends (``D >= 1``)
+    stay fully damaged.
+    """
+    for j in range(active.shape[0]):
+        c = active[j]
+        if status[c] == 0:
+            continue
+        for end in range(2):
+            D = state[c, 3 * end]
+            if D <= 0.0 or D >= 1.0:
+                continue
+            target = secant_stiffness(D, old_const[c])
+            lo = 0.0
+            hi = 1.0
+            for _ in range(64):
+                mid = 0.5 * (lo + hi)
+                if secant_stiffness(mid, new_const[c]) > target:
+                    lo = mid
+                else:
+                    hi = mid
+            state[c, 3 * end] = 0.5 * (lo + hi)
+
+
+@njit(cache=True, fastmath=True)
+def _end_energy(o, s, D, sp, const_row):
+    """Elastic energy stored at one end [J/m]: ``sec(D) o+^2/2 + K_c o-^2/2 + K_t (s - s_pl)^2/2``."""
+    opos = max(o, 0.0)
+    oneg = min(o, 0.0)
+    ds = s - sp
+    return 0.5 * (secant_stiffness(D, const_row) * opos * opos + const_row[7] * oneg * oneg
+                  + const_row[1] * ds * ds)
+
+
+@njit(cache=True, fastmath=True)
+def project_to_envelope(x, nodes, const, status, state, diss, offset, active):
+    """Bring every end whose separation lies outside the (new) strength envelope back onto
+    it at the current positions ``x``, booking the energy this releases exactly.
+
+    Called after a strength change: ends beyond the new tensile envelope soften, ends above
+    the new shear strength slip plastically, by the law itself (:func:`point_law`) at fixed
+    separation. With no motion there is no work, so the dissipation is the drop of stored
+    energy ``E_before - E_after`` (:func:`_end_energy`), shared between mode I, mode II and
+    friction in the proportions the law reports. Returns the energy released [J/m].
+    """
+    total = 0.0
+    for j in range(active.shape[0]):
+        c = active[j]
+        i0 = nodes[c, 0]
+        i1 = nodes[c, 1]
+        i2 = nodes[c, 2]
+        i3 = nodes[c, 3]
+        mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
+        my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
+        inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
+        tx = mx * inv
+        ty = my * inv
+        Kn = const[c, 0]
+        Kt = const[c, 1]
+        op = const[c, 2]
+        C = const[c, 3]
+        tanphi = const[c, 4]
+        signed_inv_dO = const[c, 5]
+        inv_dK = const[c, 6]
+        Kc = const[c, 7]
+        kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
+        for end in range(2):
+            if end == 0:
+                dx = x[i3, 0] - x[i0, 0]
+                dy = x[i3, 1] - x[i0, 1]
+            else:
+                dx = x[i2, 0] - x[i1, 0]
+                dy = x[i2, 1] - x[i1, 1]
+            o = dx * ty - dy * tx + offset[c, 2 * end]
+            s = dx * tx + dy * ty + offset[c, 2 * end + 1]
+            D = state[c, 3 * end]
+            kap = state[c, 3 * end + 1]
+            sp = state[c, 3 * end + 2]
+            before = _end_energy(o, s, D, sp, const[c])
+            _, _, Dn, kn, sn, wI, wII, wf = point_law(
+                o, s, D, kap, sp, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc)
+            if Dn == D and kn == kap:
+                continue
+            status[c] = 1
+            state[c, 3 * end] = Dn
+            state[c, 3 * end + 1] = kn
+            state[c, 3 * end + 2] = sn
+            released = max(before - _end_energy(o, s, Dn, sn, const[c]), 0.0)
+            share = wI + wII + wf
+            if share > 0.0:
+                diss[c, 0] += released * wI / share
+                diss[c, 1] += released * wII / share
+                diss[c, 2] += released * wf / share
+            else:
+                diss[c, 0] += released
+            total += released
+    return total
