@@ -513,11 +513,15 @@ def _on_boundary(points: np.ndarray, polygon: Polygon, tol: float) -> np.ndarray
     return _point_segment_distance(points, polygon.edges).min(axis=1) <= tol
 
 
-def merge_collinear(segments: np.ndarray, set_ids: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+def merge_collinear(segments: np.ndarray, set_ids: np.ndarray, tol: float,
+                    overlaps: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Merge collinear segments that overlap or touch into one; the merged piece keeps the smallest set id.
 
     Segments are grouped by line (direction modulo 180 degrees and normal offset, within ``tol``)
-    and their 1D intervals along the line are unioned.
+    and their 1D intervals along the line are unioned. When ``overlaps`` is a list, every
+    stretch where segments of two *different* sets lie on the same line and overlap (by more
+    than ``tol``) is appended to it as ``(set_a, set_b, start (2,), end (2,))`` with
+    ``set_a < set_b``: two sets that coincide there, which the merge would otherwise hide.
     """
     if len(segments) == 0:
         return segments, set_ids
@@ -544,6 +548,15 @@ def merge_collinear(segments: np.ndarray, set_ids: np.ndarray, tol: float) -> tu
         lo, hi, idx = lo[k], hi[k], idx[k]
         start, end, sid = lo[0], hi[0], set_ids[idx[0]]
         base = c[a] * n[a]
+        if overlaps is not None and len(idx) > 1:
+            ids_here = set_ids[idx]
+            for m in range(1, len(idx)):
+                prev = np.flatnonzero((hi[:m] > lo[m] + tol) & (ids_here[:m] != ids_here[m]))
+                for q in prev:
+                    stop = min(hi[q], hi[m])
+                    if stop - lo[m] > tol:
+                        sa, sb = sorted((int(ids_here[q]), int(ids_here[m])))
+                        overlaps.append((sa, sb, base + lo[m] * t[a], base + stop * t[a]))
         for m in range(1, len(idx)):
             if lo[m] <= end + tol:
                 end = max(end, hi[m])
@@ -777,7 +790,10 @@ class Model:
             mine = bodies == b
             if not mine.any():
                 continue
-            s, i = merge_collinear(segs[mine], ids[mine], tol)
+            coincide: list = []
+            s, i = merge_collinear(segs[mine], ids[mine], tol, overlaps=coincide)
+            if coincide:
+                self._warn_coincident(coincide, b)
             pieces, src, ang = split_at_crossings(s, tol)
             pieces, src2 = split_at_points(pieces, self.bodies[b].vertices, tol)
             sid = i[src[src2]]
@@ -805,6 +821,30 @@ class Model:
                 f"{int(sharp.sum())} joint crossing(s) sharper than {self.small_angle_warning:g} deg "
                 f"(worst {angles.min():.2f} deg): expect small mesh angles there", stacklevel=3)
         return DFN(segs, ids.astype(np.int32), bodies, angles, n_short)
+
+
+    def _warn_coincident(self, overlaps: list, body: int) -> None:
+        """Warn, once per pair of joint sets, that their joints coincide (see :class:`CoincidentJointsWarning`)."""
+        by_pair: dict[tuple[int, int], list] = {}
+        for sa, sb, p, q in overlaps:
+            by_pair.setdefault((sa, sb), []).append((p, q))
+        body_name = getattr(self.bodies[body], "name", "body")
+        for (sa, sb), stretches in sorted(by_pair.items()):
+            na = getattr(self.joint_sets[sa - 1], "name", f"set {sa}")
+            nb = getattr(self.joint_sets[sb - 1], "name", f"set {sb}")
+            total = sum(float(np.linalg.norm(q - p)) for p, q in stretches)
+            p, q = stretches[0]
+            warnings.warn(CoincidentJointsWarning(
+                f"joint sets {sa} ({na!r}) and {sb} ({nb!r}) coincide in body {body} ({body_name!r}): "
+                f"{len(stretches)} stretch(es) on the same lines, {total:.4g} m in all, first from "
+                f"({p[0]:.4g}, {p[1]:.4g}) to ({q[0]:.4g}, {q[1]:.4g}) m; they are merged into one joint "
+                f"tagged set {sa}. Check the sets' dip, spacing and offset if this is not intended"),
+                stacklevel=4)
+
+
+class CoincidentJointsWarning(UserWarning):
+    """Two joint sets have joints on the same line that overlap; the overlap becomes one joint
+    of the lower-numbered set (one crack element cannot belong to two sets)."""
 
 
 def cluster_points(points: np.ndarray, radius: float, prefer: np.ndarray | None = None) -> np.ndarray:
