@@ -80,9 +80,9 @@ class Damping:
     local: float = 0.0
 
     def __post_init__(self):
-        if self.mass_proportional < 0:
-            raise ValueError(f"mass-proportional damping must be >= 0, got {self.mass_proportional}")
-        if not 0.0 <= self.local < 1.0:
+        if not (math.isfinite(self.mass_proportional) and self.mass_proportional >= 0):
+            raise ValueError(f"mass-proportional damping must be finite and >= 0, got {self.mass_proportional}")
+        if not (math.isfinite(self.local) and 0.0 <= self.local < 1.0):
             raise ValueError(f"local damping must lie in [0, 1), got {self.local}")
 
     @classmethod
@@ -383,7 +383,8 @@ class Simulation:
     def run(self, n_steps: int | None = None, t_end: float | None = None, damping: Damping | None = None,
             output_every: int | None = None, history_every: int | None = None, stage: str | None = None,
             energy_tolerance: float | None = 0.05, checkpoint_every: int = 100,
-            stop_when: Callable[["Simulation"], bool] | None = None) -> "Simulation":
+            stop_when: Callable[["Simulation"], bool] | None = None, progress: bool | None = None,
+            final_output: bool = True) -> "Simulation":
         """Run one stage: ``n_steps`` steps, or until time ``t_end`` [s].
 
         Parameters
@@ -400,7 +401,12 @@ class Simulation:
         checkpoint_every : int
             Steps between in-memory copies of the last good state (written on failure).
         stop_when : callable, optional
-            ``stop_when(sim) -> bool`` checked on history steps; True ends the stage early.
+            ``stop_when(sim) -> bool`` checked on history steps; True ends the stage early. The
+            stage runner (:mod:`fdem.stages`) checks its end rules through it.
+        progress : bool, optional
+            Override the simulation's progress-bar setting for this call.
+        final_output : bool
+            Write an output frame when the call ends (default True).
         """
         damping = damping or NO_DAMPING
         self._stage = stage or f"stage{len({r['stage'] for r in self.history}) + 1}"
@@ -414,7 +420,7 @@ class Simulation:
         if self._frames == 0:
             self.write_output()
         bar = None
-        if self.progress:
+        if self.progress if progress is None else progress:
             from tqdm import tqdm
 
             bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)
@@ -443,7 +449,8 @@ class Simulation:
                     if bar_chunk >= 64:
                         bar.update(bar_chunk)
                         bar_chunk = 0
-            self.write_output()
+            if final_output:
+                self.write_output()
         except KeyboardInterrupt:
             self._write_state("interrupted_state", self.state)
             raise
