@@ -1,0 +1,213 @@
+"""Geostatic start: static CST solve, crack preloads, unbalanced-force ratio (fdem.geostatic).
+
+Physical facts checked: the uniaxial-strain column (sigma_yy = -rho g (H - y), sigma_xx =
+nu/(1-nu) sigma_yy), global equilibrium of the support reactions, nodal equilibrium of every
+free exploded node to round-off, the exactness of the traction prior for a uniform stress,
+the unbalanced-force ratio of a body released under gravity, and an undamped slope that
+stays at rest from the static start while the K0 start jolts.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from fdem.cohesive import CrackSet, four_slope_property_sets
+from fdem.contact import ContactSet
+from fdem.geostatic import (conforming_static_stress, crack_preload_forces, crack_strength_check, geostatic_start,
+                            preload_residual, unbalanced_force_ratio)
+from fdem.materials import ElasticMaterial
+from fdem.mesh import structured_rectangle
+from fdem.model import FIX_Y, Model, geostatic_stress
+from fdem.solver import Simulation
+
+E, NU, RHO, G = 0.59e9, 0.29, 2680.0, 9.81
+H_COL, W_COL = 10.0, 2.0
+
+
+def column(exploded: bool, nx: int = 4, ny: int = 40) -> Model:
+    """Gravity column: rollers on the sides, fixed base, plane strain."""
+    model = Model.from_mesh(structured_rectangle(nx, ny, W_COL, H_COL), ElasticMaterial(E, NU, RHO),
+                            exploded=exploded)
+    model.set_gravity(0.0, -G)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    return model
+
+
+@pytest.mark.parametrize("exploded", [False, True])
+def test_column_matches_uniaxial_strain(exploded):
+    model = column(exploded)
+    sol = conforming_static_stress(model)
+    c = model.centroids0
+    for y in (2.0, 5.0, 8.0):
+        band = np.abs(c[:, 1] - y) < 0.5 * H_COL / 40 + 1e-9
+        syy = sol.stress[band, 1].mean()
+        assert syy == pytest.approx(-RHO * G * (H_COL - y), rel=0.01)
+    # laterally confined: sigma_xx = nu/(1-nu) sigma_yy in every triangle
+    np.testing.assert_allclose(sol.stress[:, 0], NU / (1 - NU) * sol.stress[:, 1], rtol=1e-9, atol=1e-6)
+    # the supports carry the weight of the column: reaction = rho g H W upwards
+    assert sol.reaction[1] == pytest.approx(RHO * G * H_COL * W_COL, rel=1e-12)
+    assert abs(sol.reaction[0]) < 1e-9 * RHO * G * H_COL * W_COL
+    assert sol.residual < 1e-10
+
+
+def test_exploded_and_conforming_give_the_same_stress():
+    a = conforming_static_stress(column(False)).stress
+    b = conforming_static_stress(column(True)).stress
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-6)
+
+
+def test_unsupported_body_and_moving_support_are_refused():
+    model = Model.from_mesh(structured_rectangle(2, 2, 1.0, 1.0), ElasticMaterial(E, NU, RHO))
+    model.set_gravity(0.0, -G)
+    with pytest.raises(ValueError, match="body 0.*no support"):
+        conforming_static_stress(model)
+    model.roller("bottom", "y")  # vertical support only: sliding in x stays free
+    with pytest.raises(ValueError, match="body 0.*1 rigid-body mode"):
+        conforming_static_stress(model)
+    model.prescribe_velocity("left", vx=1e-3)
+    with pytest.raises(ValueError, match=r"node \d+ at \(0, .*prescribed x velocity 0.001"):
+        conforming_static_stress(model)
+
+
+def test_uniform_stress_prior_is_exact():
+    """With a uniform stress, no gravity and the boundary held, the traction prior
+    F = sigma.n L0/2 already balances every interior node: the correction vanishes."""
+    model = Model.from_mesh(structured_rectangle(5, 4, 5.0, 4.0), ElasticMaterial(E, NU, RHO))
+    for side in ("bottom", "top", "left", "right"):
+        model.fix(side)
+    s = np.array([-2.0e5, -5.0e5, 0.7e5])
+    stress = np.tile(s, (model.n_triangles, 1))
+    F = crack_preload_forces(model, stress)
+    topo = model.topology
+    cn = topo.crack_nodes
+    m = 0.5 * (topo.x0[cn[:, 1]] + topo.x0[cn[:, 2]] - topo.x0[cn[:, 0]] - topo.x0[cn[:, 3]])
+    t = m / np.linalg.norm(m, axis=1, keepdims=True)
+    n = np.column_stack([t[:, 1], -t[:, 0]])
+    sig = np.array([[s[0], s[2]], [s[2], s[1]]])
+    expect = 0.5 * topo.crack_length0[:, None] * (n @ sig)
+    np.testing.assert_allclose(F[:, 0], expect, atol=1e-9 * np.abs(expect).max())
+    np.testing.assert_allclose(F[:, 1], expect, atol=1e-9 * np.abs(expect).max())
+
+
+@pytest.fixture(scope="module")
+def slope_topology():
+    from fdem.meshing import mesh_model
+    from fdem.scenes import four_slope_model
+    from fdem.topology import build_topology
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mesh = mesh_model(four_slope_model("low", "coarse"), size=2.5)
+    return build_topology(mesh)
+
+
+def slope_model(topo) -> Model:
+    model = Model(topo, ElasticMaterial(E, NU, RHO))
+    model.set_gravity(0.0, -G)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    return model
+
+
+def test_preload_holds_every_free_node_of_a_jointed_slope(slope_topology):
+    model = slope_model(slope_topology)
+    sol = conforming_static_stress(model)
+    F = crack_preload_forces(model, sol.stress)
+    assert F.shape == (slope_topology.n_cracks, 2, 2)
+    assert preload_residual(model, sol.stress, F) < 1e-8
+    # the base carries the weight: sum of the y reactions = total weight
+    weight = RHO * G * float(slope_topology.triangle_area0.sum())
+    assert sol.reaction[1] == pytest.approx(weight, rel=1e-10)
+
+
+def run_slope(topo, start: str, elastic: bool, periods: float = 1.0):
+    """Undamped run of the jointed slope with crack elements and contact; returns the maximum
+    node speed [m/s] over ``periods`` slope periods 4 H / c_s, the UFR after one step and the
+    crack set."""
+    model = slope_model(topo)
+    cracks = CrackSet(topo, four_slope_property_sets(), contact_penalty=10 * E)
+    if start == "static":
+        report = geostatic_start(model, cracks)
+    else:
+        import cases.four_slopes as fs
+        from fdem.scenes import four_slope_model
+
+        surface = fs.ground_surface(four_slope_model("low", "coarse").bodies[0])
+        model.set_initial_stress(geostatic_stress(RHO, G, surface=surface, poisson=NU))
+        report = None
+    if elastic:
+        cracks.hold_elastic()
+    contact = ContactSet(topo, 10 * E, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
+    sim = Simulation(model, providers=[cracks, contact], progress=False)
+    sim.monitors.clear()
+    c_s = np.sqrt(E / (2 * (1 + NU)) / RHO)
+    n_steps = int(np.ceil(periods * 4 * 15.0 / c_s / sim.dt))
+    sim.step()
+    ufr1 = unbalanced_force_ratio(sim)
+    vmax = 0.0
+    for k in range(n_steps):
+        sim.step()
+        if k % 20 == 0:
+            vmax = max(vmax, float(np.abs(sim.state.v).max()))
+    return vmax, ufr1, cracks, report
+
+
+def test_static_start_stays_at_rest_and_k0_start_jolts(slope_topology):
+    v_static, ufr_static, _, report = run_slope(slope_topology, "static", elastic=True)
+    v_k0, ufr_k0, _, _ = run_slope(slope_topology, "k0", elastic=True)
+    print(f"max speed over one slope period: static start {v_static:.3g} m/s (UFR {ufr_static:.3g}), "
+          f"K0 start {v_k0:.3g} m/s (UFR {ufr_k0:.3g})")
+    assert report.preload_residual < 1e-8
+    assert ufr_static < 1e-8
+    assert v_static < 1e-3
+    assert v_k0 > 0.05
+
+
+def test_over_strength_elements_are_those_that_yield_first(slope_topology):
+    """At strength factor 1 the crack elements whose static traction exceeds Mohr-Coulomb
+    (crack_strength_check) are exactly the ones the law makes slide at the first update."""
+    model = slope_model(slope_topology)
+    cracks = CrackSet(slope_topology, four_slope_property_sets(), contact_penalty=10 * E)
+    report = geostatic_start(model, cracks)
+    over = report.over_strength
+    flagged = np.union1d(over["tensile"], over["shear"])
+    x = slope_topology.x0.copy()
+    cracks.add_forces(x, np.zeros_like(x), np.zeros_like(x), 1e-6, 0)
+    np.testing.assert_array_equal(cracks.inelastic(), flagged)
+    assert set(over["by_tag"]) <= {0, 1}
+    assert crack_strength_check(cracks, report.preload)["max_ratio"] == over["max_ratio"]
+
+
+def test_unbalanced_force_ratio_of_a_released_column():
+    """Unstressed column under gravity at rest: every node not held vertically is unbalanced by
+    m g, so R = (total mass - mass of the vertically fixed nodes) / total mass."""
+    ratios = []
+    for exploded in (False, True):
+        model = column(exploded, nx=2, ny=6)
+        sim = Simulation(model, progress=False)
+        m = sim.state.mass
+        held = (model.flags & FIX_Y) != 0
+        expect = m[~held].sum() / m.sum()
+        r = unbalanced_force_ratio(sim)
+        assert r == pytest.approx(expect, rel=1e-12)
+        ratios.append(r)
+    assert ratios[0] == pytest.approx(ratios[1], rel=1e-12)
+
+
+def test_geostatic_start_refuses_to_overwrite_initial_stress():
+    model = column(False, nx=2, ny=4)
+    model.set_initial_stress((-1.0, -1.0, 0.0))
+    with pytest.raises(ValueError, match="replace=True"):
+        geostatic_start(model)
+    report = geostatic_start(model, replace=True)
+    np.testing.assert_array_equal(model.initial_stress, report.solution.stress)
+    # the static start of the (conforming) column is in equilibrium: R at round-off
+    sim = Simulation(model, progress=False)
+    assert unbalanced_force_ratio(sim) < 1e-10
+    sim.step()
+    assert unbalanced_force_ratio(sim) < 1e-10
