@@ -109,6 +109,39 @@ def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float
             "balance_error_relative": float(row.get("balance_error_relative", float("nan")))}
 
 
+STUDY_SIZES = (0.5, 0.25, 0.125)
+STUDY_FRACTIONS = (0.0, 0.05, 0.1, 0.2, 0.5, 1.0)
+STUDY_CASES = ((30.0, 20.0), (40.0, 25.0))
+
+
+def damping_study(path: Path, sizes=STUDY_SIZES, fractions=STUDY_FRACTIONS, cases=STUDY_CASES) -> list[dict]:
+    """Slide at 1 s against the rigid-block answer for each case, mesh size and damping fraction.
+
+    Writes the rows to ``path`` (JSON) after every run, so a partial study is kept; rows
+    already in ``path`` are not run again. Run with ``NUMBA_NUM_THREADS=1`` for comparable
+    wall times.
+    """
+    rows = json.loads(path.read_text())["runs"] if path.exists() else []
+    done = {(r["theta_deg"], r["phi_deg"], r["size_m"], r["element_damping"]) for r in rows}
+    for theta, phi in cases:
+        for size in sizes:
+            for fraction in fractions:
+                if (theta, phi, size, fraction) in done:
+                    continue
+                r = run(theta, phi, 1.0, size=size, element_damping=fraction)
+                r["size_m"] = size
+                r["slide_error"] = r["slide_m"] / r["exact_m"] - 1.0
+                rows.append(r)
+                print(f"theta {theta:g} phi {phi:g} size {size:g} damping {fraction:g}: "
+                      f"error {100 * r['slide_error']:+.3f} %, dt {r['dt_s']:.4g} s, wall {r['wall_s']:.1f} s",
+                      flush=True)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(json.dumps({"description": "block on incline, slide at 1 s vs rigid block, "
+                                            "element damping as a fraction of critical",
+                                            "runs": rows}, indent=1))
+    return rows
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--theta", type=float, default=30.0)
@@ -122,7 +155,12 @@ def main(argv=None):
                              f"default {DEFAULT_ELEMENT_DAMPING})")
     parser.add_argument("--out", type=Path, default=Path("runs/incline"))
     parser.add_argument("--max-steps", type=int, default=None, help="unused: the run lasts --t-end")
+    parser.add_argument("--damping-study", type=Path, default=None, metavar="JSON",
+                        help="run the mesh-size x damping-fraction study (docs/damping.md) into this file")
     args = parser.parse_args(argv)
+    if args.damping_study is not None:
+        damping_study(args.damping_study)
+        return
     r = run(args.theta, args.phi, args.t_end, args.width, args.height, out_dir=args.out, size=args.size,
             element_damping=args.element_damping)
     print(json.dumps(r, indent=1))
