@@ -691,3 +691,58 @@ class CrackSet:
         if self._active.size == 0:
             return math.inf
         return float(K.stable_dt_kernel(mass, self._nodes, self._const, self._active, self.topology.n_nodes))
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        """Every piece of mutable state, copied: restored by :meth:`load_state_dict` into a crack
+        set built the same way (same topology, property sets, heterogeneity, scheme), the
+        elements continue bit for bit (:mod:`fdem.checkpoint`). Arrays are in internal
+        (colour-major) order; ``events`` is the structured :data:`EVENT_DTYPE` array."""
+        d = {
+            "kind": type(self).__name__, "n_cracks": self.n_cracks, "scheme": self.scheme,
+            "const": self._const.copy(), "status": self._status.copy(), "state": self._state.copy(),
+            "diss": self._diss.copy(), "offset": self._offset.copy(), "broken": self.broken.copy(),
+            "failure_mode": self.failure_mode.copy(), "broke_flag": self._broke_flag.copy(),
+            "released": float(self.released), "newly_broken": self.newly_broken.copy(),
+            "events": self.events.copy(), "time": float(self._time),
+            "last_step": None if self._last_step is None else int(self._last_step),
+            "elastic_only": bool(self._elastic_only), "active": self._active.copy(),
+            "reduction": float(self.interfaces._reduction),
+            "strength_multiplier": self.strength_multiplier.copy(),
+            "x_last": None if self._x_last is None else np.array(self._x_last, dtype=np.float64),
+        }
+        if self.scheme == "gather":
+            d["fe"] = self._fe.copy()
+        return d
+
+    def load_state_dict(self, d: dict, x: np.ndarray | None = None) -> None:
+        """Restore :meth:`state_dict` output. ``x`` (n_nodes, 2): the simulation's current
+        position array, which later strength changes project at (default: a copy of the
+        positions saved with the state). The reduction factor is set on the interfaces
+        directly and the constant rows are restored exactly as saved (nothing is re-filled)."""
+        if d.get("kind", type(self).__name__) != type(self).__name__ or int(d["n_cracks"]) != self.n_cracks:
+            raise ValueError(f"crack state of a {d.get('kind')} with {d['n_cracks']} elements does not fit this "
+                             f"{type(self).__name__} with {self.n_cracks} elements")
+        if d["scheme"] != self.scheme:
+            raise ValueError(f"crack state saved with scheme {d['scheme']!r}, this crack set uses {self.scheme!r}")
+        for name in ("const", "status", "state", "diss", "offset", "broke_flag"):
+            getattr(self, "_" + name)[:] = d[name]
+        self.broken[:] = d["broken"]
+        self.failure_mode[:] = d["failure_mode"]
+        self.strength_multiplier = np.array(d["strength_multiplier"], dtype=np.float64)
+        self.released = float(d["released"])
+        self.newly_broken = np.array(d["newly_broken"], dtype=np.int64)
+        ev = np.asarray(d["events"], dtype=EVENT_DTYPE)
+        self._events = [tuple(r.item()) for r in ev]
+        self._events_arr = None
+        self._time = float(d["time"])
+        self._last_step = None if d["last_step"] is None else int(d["last_step"])
+        self._elastic_only = bool(d["elastic_only"])
+        self.interfaces._reduction = float(d["reduction"])
+        if self.scheme == "gather":
+            self._fe[:] = d["fe"]
+        if x is not None:
+            self._x_last = x
+        else:
+            self._x_last = None if d["x_last"] is None else np.array(d["x_last"], dtype=np.float64)
+        self._set_active(np.array(d["active"], dtype=np.int64))

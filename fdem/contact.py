@@ -579,3 +579,54 @@ class ContactSet:
                 f"(body {body[i]}, centroid ({xi[0]:.6g}, {xi[1]:.6g})) and triangle {j} "
                 f"(body {body[j]}, centroid ({xj[0]:.6g}, {xj[1]:.6g})) share {a:.3g} m^2; "
                 f"move the bodies apart or mesh them as one ({bad.size} overlapping pair(s) in all)")
+
+    # ------------------------------------------------------------------ checkpoint
+    _PAIR_STATE = ("pairs", "_keys", "_history", "_mu_pair", "_mu_base_pair", "_kt_pair", "_damp_pair", "_pair_i",
+                   "_pair_j", "_bounds", "_f_target", "_touching", "_inc_ptr", "_inc_pair")
+
+    def state_dict(self) -> dict:
+        """Every piece of mutable state, copied: restored by :meth:`load_state_dict` into a
+        contact set built the same way (same topology and parameters), contact continues bit
+        for bit (:mod:`fdem.checkpoint`): broken faces, bonds, contactors, face friction, the
+        pair list with its slip history and everything derived from it, the search reference
+        positions, the energy sums."""
+        d = {
+            "kind": type(self).__name__, "n_triangles": int(self.topology.n_triangles),
+            "broken": self._broken.copy(), "any_broken": bool(self._any_broken), "bond": self._bond.copy(),
+            "is_contactor": self._is_contactor.copy(), "any_extra_contactor": bool(self._any_extra_contactor),
+            "n_inelastic_seen": int(self._n_inelastic_seen), "mu_tri": self.mu_tri.copy(),
+            "crack_mu": self._crack_mu.copy(), "reduction": float(self._reduction),
+            "x_search": None if self._x_search is None else self._x_search.copy(),
+            "needs_search": bool(self._needs_search), "n_searches": int(self.n_searches),
+            "e_normal": float(self._e_normal), "e_tangential": float(self._e_tangential),
+            "w_tangential": float(self._w_tangential), "w_damping": float(self._w_damping),
+        }
+        for name in self._PAIR_STATE:
+            d["pair" + name if name[0] == "_" else name] = np.array(getattr(self, name), copy=True)
+        return d
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` output (the active contactor list and slots are rebuilt)."""
+        n_tri = self.topology.n_triangles
+        if d.get("kind", type(self).__name__) != type(self).__name__ or int(d["n_triangles"]) != n_tri:
+            raise ValueError(f"contact state of a {d.get('kind')} with {d['n_triangles']} triangles does not fit this "
+                             f"{type(self).__name__} with {n_tri} triangles")
+        self._broken[:] = d["broken"]
+        self._any_broken = bool(d["any_broken"])
+        self._bond[:] = d["bond"]
+        self._is_contactor[:] = d["is_contactor"]
+        self._any_extra_contactor = bool(d["any_extra_contactor"])
+        self._n_inelastic_seen = int(d["n_inelastic_seen"])
+        self.mu_tri[:] = d["mu_tri"]
+        self._crack_mu[:] = d["crack_mu"]
+        self._reduction = float(d["reduction"])
+        for name in self._PAIR_STATE:
+            setattr(self, name, np.array(d["pair" + name if name[0] == "_" else name], copy=True))
+        self._x_search = None if d["x_search"] is None else np.array(d["x_search"], dtype=np.float64)
+        self._needs_search = bool(d["needs_search"])
+        self.n_searches = int(d["n_searches"])
+        self._e_normal = float(d["e_normal"])
+        self._e_tangential = float(d["e_tangential"])
+        self._w_tangential = float(d["w_tangential"])
+        self._w_damping = float(d["w_damping"])
+        self._refresh_active()
