@@ -187,12 +187,13 @@ def _check_rigid_modes(model, points, tri, fixed) -> None:
         if tris_k.size == 0:  # a point in no triangle
             continue
         centre = points[pts_k].mean(axis=0)
-        r = (points - centre) / scale
         fx = pts_k[fixed[pts_k, 0]]
         fy = pts_k[fixed[pts_k, 1]]
         # rigid modes (ux, uy, rotation) seen by each fixed dof
-        rows_x = np.column_stack([np.ones(fx.size), np.zeros(fx.size), -r[fx, 1]])
-        rows_y = np.column_stack([np.zeros(fy.size), np.ones(fy.size), r[fy, 0]])
+        rx = (points[fx] - centre) / scale
+        ry = (points[fy] - centre) / scale
+        rows_x = np.column_stack([np.ones(fx.size), np.zeros(fx.size), -rx[:, 1]])
+        rows_y = np.column_stack([np.zeros(fy.size), np.ones(fy.size), ry[:, 0]])
         R = np.vstack([rows_x, rows_y])
         sv = np.linalg.svd(R, compute_uv=False) if R.shape[0] else np.zeros(0)
         rank = int(np.sum(sv > 1e-9 * max(sv.max(initial=0.0), 1.0)))
