@@ -1,19 +1,22 @@
 """The four jointed slopes of cases.md A (seed 002): mesh a 15 m slope with its brick-pattern DFN,
-bring it to geostatic equilibrium, reduce the strength of crack elements and joints by 10 % per
-stage down to 30 %, and follow the failure and runout.
+start it in static equilibrium, reduce the strength of crack elements, joints and contact
+until it fails, and follow the failure and runout to rest (:mod:`fdem.workflow`).
 
 Writes to ``--out``: the mesh (``.msh``, a PNG and a ``.vtu`` with crack elements as line cells),
 ``slope.pvd`` and ``slope_cracks.pvd`` (open them in ParaView), ``history.csv`` (energy ledger
-and monitors per stage), PNG snapshots and ``summary.json`` (runout distance and volume, peak
-kinetic energy, fracture events by mode).
+and monitors per stage), PNG snapshots and ``summary.json`` (every stage and why it ended, the
+factor of safety when searched, runout distance and volume, peak kinetic energy, fracture
+events by mode).
 
-    python cases/four_slopes.py --out runs/demo --max-steps 3000      # quick look, coarse mesh
+    python cases/four_slopes.py --out runs/low_fine                   # the workflow at size 0.5
     python cases/four_slopes.py --angle high --spacing coarse --size 0.3 --out runs/high_coarse
+    python cases/four_slopes.py --fos 1.0 3.0 0.02 --out runs/fos      # factor of safety first
     python cases/four_slopes.py --max-steps 0 --out runs/mesh_only     # mesh and pictures only
 
 Paper (seed 002): about 180,000 triangles (``--size 0.18``), geostatic equilibrium over 500,000
-steps of 2 us, then 10 % strength reduction per 10,000 steps. Defaults here are scaled for a
-laptop; every stage length is a parameter.
+steps of 2 us, then 10 % strength reduction per 10,000 steps (``--reduction rate``). Here the
+geostatic stage is a static solve with pre-loaded crack elements, and stages end by physics
+(convergence, failure, rest), not by step counts.
 """
 from __future__ import annotations
 
@@ -28,13 +31,15 @@ import numpy as np
 from fdem.analysis import fragments, released_kinetic_energy, runout
 from fdem.cohesive import CrackSet, four_slope_property_sets
 from fdem.contact import ContactSet
+from fdem.geostatic import geostatic_start
 from fdem.materials import ElasticMaterial
 from fdem.meshing import mesh_model, quality_report
 from fdem.model import Model, geostatic_stress
 from fdem.preview import plot_mesh_png, write_mesh_vtu
 from fdem.scenes import four_slope_model
-from fdem.solver import Damping, Simulation
+from fdem.solver import Simulation
 from fdem.topology import build_topology
+from fdem.workflow import SlopeWorkflow, run_slope_workflow
 
 # Table 1 of the paper (cases.md A): finite elements
 YOUNG, POISSON, DENSITY = 0.59e9, 0.29, 2680.0
@@ -58,44 +63,31 @@ def ground_surface(slope) -> callable:
     return lambda x: np.interp(x, top[:, 0], top[:, 1])
 
 
-def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True) -> tuple[Simulation, CrackSet]:
-    """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity."""
+def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, start: str = "static",
+               progress: bool = True) -> tuple[Simulation, CrackSet]:
+    """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity.
+
+    ``start="static"`` (default) puts it in static equilibrium with pre-loaded crack elements
+    (:func:`fdem.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
+    laterally confined stress ``sigma_xx = K0 sigma_yy`` of a flat ground instead (not in
+    equilibrium under the face: it needs a damped settling stage)."""
     model = Model(topology, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_gravity(0.0, -GRAVITY)
     model.fix("bottom")
     model.roller("left", "x")
     model.roller("right", "x")
-    model.set_initial_stress(geostatic_stress(DENSITY, GRAVITY, surface=ground_surface(geometry.bodies[0]),
-                                              poisson=POISSON))
     cracks = CrackSet(topology, four_slope_property_sets(), contact_penalty=CONTACT_PENALTY)
+    if start == "static":
+        geostatic_start(model, cracks)
+    elif start == "k0":
+        model.set_initial_stress(geostatic_stress(DENSITY, GRAVITY, surface=ground_surface(geometry.bodies[0]),
+                                                  poisson=POISSON))
+    else:
+        raise ValueError(f"start must be 'static' or 'k0', got {start!r}")
     contact = ContactSet(topology, CONTACT_PENALTY, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
-    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="slope", pictures=pictures)
+    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="slope", pictures=pictures,
+                     progress=progress)
     return sim, cracks
-
-
-def run_stages(sim: Simulation, cracks: CrackSet, geostatic_steps: int, reduction_steps: int,
-               runout_steps: int, max_steps: int | None, final_factor: float = 0.3) -> list[tuple[str, int]]:
-    """Geostatic equilibrium (local damping 0.8), strength reduction 10 % per stage down to
-    ``final_factor`` (no damping), then runout (no damping). ``max_steps`` caps the total."""
-    plan = [("geostatic", geostatic_steps, 1.0, Damping.quasi_static())]
-    factor = 1.0
-    while factor > final_factor + 1e-9:
-        factor = round(factor - 0.1, 10)
-        plan.append((f"reduction_{int(round(100 * factor))}pct", reduction_steps, factor, Damping()))
-    plan.append(("runout", runout_steps, factor, Damping()))
-    budget = max_steps if max_steps is not None else sum(p[1] for p in plan)
-    done = []
-    for name, steps, strength, damping in plan:
-        steps = min(steps, budget)
-        if steps <= 0:
-            break
-        cracks.scale_strength(strength)
-        # Geostatic equilibrium with elastic crack elements, as the paper's initial FEM stage.
-        cracks.hold_elastic(name == "geostatic")
-        sim.run(n_steps=steps, damping=damping, stage=name, output_every=max(1, steps // 4))
-        budget -= steps
-        done.append((name, steps))
-    return done
 
 
 def main(argv=None) -> dict:
@@ -105,10 +97,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--size", type=float, default=0.5, help="element size [m] (0.18 gives ~180k triangles)")
     parser.add_argument("--refine", type=float, default=None, help="element size factor on joints, e.g. 0.5")
     parser.add_argument("--out", type=Path, default=Path("runs/four_slopes"))
-    parser.add_argument("--geostatic-steps", type=int, default=20_000)
-    parser.add_argument("--reduction-steps", type=int, default=10_000, help="steps per 10 %% strength reduction")
-    parser.add_argument("--runout-steps", type=int, default=100_000)
-    parser.add_argument("--max-steps", type=int, default=None, help="cap on the total steps (0: mesh only)")
+    parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
+                        help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
+    parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
+                        help="search the factor of safety in [LOWER, UPPER] to TOL first")
+    parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
+    parser.add_argument("--max-steps", type=int, default=None, help="0: mesh and pictures only")
     parser.add_argument("--no-pictures", action="store_true", help="skip PNG snapshots of each output frame")
     args = parser.parse_args(argv)
     try:
@@ -146,24 +140,34 @@ def main(argv=None) -> dict:
         print(f"time step {sim.dt:.3g} s (critical limits: "
               + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
         t1 = time.perf_counter()
+        workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
+                                 runout_time=args.runout_time)
         try:
-            stages = run_stages(sim, cracks, args.geostatic_steps, args.reduction_steps, args.runout_steps,
-                                args.max_steps)
+            result = run_slope_workflow(sim, workflow, out_dir=args.out)
         finally:
             sim.close()
+        result.pop("_fos_result", None)
         v = geometry.bodies[0].vertices
         toe_y = v[v[:, 1] > 0, 1].min()  # the toe floor is the lowest part of the ground surface
         toe_x = float(v[v[:, 1] == toe_y, 0].max())
         n_frag, _ = fragments(topo, cracks.broken)
         modes = cracks.events["mode"] if len(cracks.events) else np.array([])
+        summary.update(result)
         summary.update({
-            "stages": stages, "steps": sim.state.step, "simulated_time_s": sim.state.time, "dt_s": sim.dt,
+            "steps": sim.state.step, "simulated_time_s": sim.state.time, "dt_s": sim.dt,
             "seconds_simulation": time.perf_counter() - t1,
             "runout": runout(topo, sim.state.x, toe_x=toe_x),
             "peak_kinetic_energy_J_per_m": released_kinetic_energy(sim.history),
-            "n_broken": int(cracks.broken.sum()), "n_fragments": int(n_frag),
+            "n_fragments": int(n_frag),
             "events_by_mode": {m: int((modes == m).sum()) for m in ("I", "II", "mixed")},
+            "ledger_error_relative": float(sim.history[-1]["balance_error_relative"]) if sim.history else 0.0,
         })
+        for st in result["stages"]:
+            print(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
+                  f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")
+        print(f"outcome: {summary['outcome']}"
+              + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
+              + (f"; factor of safety {summary['fos']['fos']:.3f}" if summary.get("fos") else ""))
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
               f"{summary['n_broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {args.out / 'slope.pvd'}")

@@ -60,12 +60,16 @@ class Convergence:
     kinetic_ratio : limit on the kinetic energy over the stage's peak kinetic energy [-]
     speed : limit on the largest monitored speed [m/s]
     min_time : simulated time [s] before the rule may fire (default 0)
+    hold_for : simulated time [s] the limits must keep holding, check after check, before the
+        stage ends (default 0: the first check that meets them); a runout that comes to rest
+        and stays at rest
     """
 
     unbalanced_ratio: float | None = 1e-4
     kinetic_ratio: float | None = None
     speed: float | None = None
     min_time: float = 0.0
+    hold_for: float = 0.0
 
     def __post_init__(self):
         _positive_or_none(self.unbalanced_ratio, "Convergence.unbalanced_ratio")
@@ -73,6 +77,8 @@ class Convergence:
         _positive_or_none(self.speed, "Convergence.speed")
         if not (math.isfinite(self.min_time) and self.min_time >= 0):
             raise ValueError(f"Convergence.min_time must be >= 0, got {self.min_time!r}")
+        if not (math.isfinite(self.hold_for) and self.hold_for >= 0):
+            raise ValueError(f"Convergence.hold_for must be >= 0, got {self.hold_for!r}")
         if self.unbalanced_ratio is None and self.kinetic_ratio is None and self.speed is None:
             raise ValueError("Convergence needs at least one of unbalanced_ratio, kinetic_ratio, speed")
 
@@ -257,7 +263,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     ramp = None
     if stage.reduction_ramp is not None:
         ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stage.reduction_ramp[1])
-    status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0}
+    status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
+              "since": None}
     conv = stage.converge
 
     def rule(s: Simulation) -> bool:
@@ -290,10 +297,15 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
             if ok and conv.unbalanced_ratio is not None:
                 status["ratio"] = unbalanced_force_ratio(s)
                 ok = status["ratio"] <= conv.unbalanced_ratio
-            if ok:
-                status["reason"] = "converged"
-                status["detail"] = f"after {t:.4g} s"
-                return True
+            if not ok:
+                status["since"] = None
+            else:
+                if status["since"] is None:
+                    status["since"] = t
+                if t - status["since"] >= conv.hold_for:
+                    status["reason"] = "converged"
+                    status["detail"] = f"after {t:.4g} s"
+                    return True
         return False
 
     wall = time.perf_counter()

@@ -1,0 +1,139 @@
+"""The slope workflow: equilibrium, factor of safety, strength reduction to failure, runout to rest.
+
+Composed of :mod:`fdem.stages` so that a case script only builds the model and calls
+:func:`run_slope_workflow`:
+
+1. **Equilibrium check** at ``F = 1`` (the model must come from a geostatic start,
+   :func:`fdem.geostatic.geostatic_start`): a damped stage that must converge at once; a
+   slope that does not stand at ``F = 1`` is reported, not hidden.
+2. **Factor of safety** (optional): :func:`fdem.stages.factor_of_safety` from that state.
+3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
+   damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
+   the strength falls by 10 % of its initial value per 10,000 steps of 2 us, i.e. ``1/F``
+   falls by 5 per second, undamped).
+4. **Runout** at the factor where the slope failed: dynamic (no quasi-static damping), until
+   the kinetic energy falls below a fraction of its peak and stays there for one response
+   time, capped in simulated time.
+
+Every stage's result (why it ended, when, how many steps) goes into the returned summary.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .solver import NO_DAMPING, Damping, Simulation
+from .stages import (Convergence, Failure, Stage, crack_set_of, factor_of_safety, response_time, run_stage)
+
+__all__ = ["SlopeWorkflow", "run_slope_workflow", "reduction_steps"]
+
+
+def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[float, ...]:
+    """Reduction factors ``F`` whose strengths ``1/F`` fall by ``step`` of the initial value,
+    from ``1 - step`` down to ``final_strength`` (the four-slope schedule: 0.9, ..., 0.3)."""
+    if not (0 < final_strength < 1 and 0 < step < 1):
+        raise ValueError(f"final_strength and step must lie in (0, 1), got {final_strength}, {step}")
+    n = int(math.floor((1.0 - final_strength) / step + 1e-9))
+    return tuple(1.0 / round(1.0 - k * step, 10) for k in range(1, n + 1))
+
+
+@dataclass
+class SlopeWorkflow:
+    """Settings of :func:`run_slope_workflow` (times in simulated seconds; ``None``: from the
+    model's response time ``T``, :func:`fdem.stages.response_time`).
+
+    reduction : ``"steps"`` (damped equilibrium at each factor; default) or ``"rate"``
+    factors : the factors ``F`` of the steps (default :func:`reduction_steps`: 1/0.9 ... 1/0.3)
+    reduction_rate : fall of the strength ``1/F`` per second in ``"rate"`` mode (paper: 5 /s)
+    final_strength : the strength ``1/F`` the rate mode stops at (paper: 0.3)
+    fos : ``(lower, upper, tol)`` to search the factor of safety first, or ``None``
+    equilibrium_ratio : unbalanced-force ratio that counts as equilibrium (default 1e-4)
+    step_time : cap of each damped stage (default ``10 T``)
+    fail_displacement : displacement since a stage began that counts as failure [m]
+        (default 1 % of the model height)
+    runout_time : cap of the runout stage (default ``max(20 T, 4 sqrt(2 H / g))``, four times
+        the free-fall time over the model height ``H``)
+    rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
+        its peak for one response time (default 0.01)
+    """
+
+    reduction: str = "steps"
+    factors: tuple[float, ...] = field(default_factory=reduction_steps)
+    reduction_rate: float = 5.0
+    final_strength: float = 0.3
+    fos: tuple[float, float, float] | None = None
+    equilibrium_ratio: float = 1e-4
+    step_time: float | None = None
+    fail_displacement: float | None = None
+    runout_time: float | None = None
+    rest_kinetic_ratio: float = 0.01
+
+    def __post_init__(self):
+        if self.reduction not in ("steps", "rate"):
+            raise ValueError(f"reduction must be 'steps' or 'rate', got {self.reduction!r}")
+        if any(not (math.isfinite(f) and f > 0) for f in self.factors):
+            raise ValueError(f"reduction factors must be positive and finite, got {self.factors}")
+        for name in ("reduction_rate", "final_strength", "equilibrium_ratio", "rest_kinetic_ratio"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"SlopeWorkflow.{name} must be positive and finite, got {v!r}")
+
+
+def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
+    """Run the slope workflow (module docstring) on ``sim``; returns a summary dict with every
+    stage's result, the factor of safety when searched, the factor at failure and the state
+    the run ended in (``stable`` or ``failed``)."""
+    wf = workflow or SlopeWorkflow()
+    cracks = crack_set_of(sim)
+    if cracks is None:
+        raise ValueError("run_slope_workflow needs crack elements (a CrackSet provider)")
+    T = response_time(sim.model)
+    height = float(np.ptp(sim.model.topology.x0[:, 1]))
+    g = float(np.linalg.norm(sim.gravity)) or 9.81
+    step_time = wf.step_time or 10.0 * T
+    fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
+    damped = Damping.quasi_static()
+    summary: dict = {"response_time_s": T, "stages": [], "fos": None, "failed_at_factor": None}
+
+    def record(result):
+        summary["stages"].append(result.as_dict())
+        return result
+
+    cracks.hold_elastic(False)
+    eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
+                                     converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
+    summary["equilibrium"] = eq.reason
+    if eq.reason != "converged":
+        summary["outcome"] = "failed"
+        summary["failed_at_factor"] = 1.0
+    else:
+        if wf.fos is not None:
+            lower, upper, tol = wf.fos
+            fos = factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir)
+            summary["fos"] = fos.as_dict()
+            summary["_fos_result"] = fos
+        if wf.reduction == "steps":
+            for F in wf.factors:
+                r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
+                                                damping=damped, fail=fail,
+                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio))))
+                if r.reason != "converged":
+                    summary["failed_at_factor"] = F
+                    break
+        else:
+            F_end = 1.0 / wf.final_strength
+            seconds = (1.0 - wf.final_strength) / wf.reduction_rate
+            r = record(run_stage(sim, Stage("reduction_rate", duration=seconds, reduction_ramp=(F_end, seconds),
+                                            damping=NO_DAMPING)))
+            summary["failed_at_factor"] = F_end
+        summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
+    if summary["outcome"] == "failed":
+        cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
+        record(run_stage(sim, Stage("runout", max_time=cap, damping=NO_DAMPING,
+                                    converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio,
+                                                         min_time=T, hold_for=T))))
+    summary["final_reduction"] = cracks.interfaces.reduction
+    summary["n_broken"] = int(cracks.broken.sum())
+    return summary
