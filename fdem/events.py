@@ -37,7 +37,7 @@ from scipy.spatial.distance import pdist
 
 __all__ = [
     "CATALOGUE_DTYPE", "EventCatalogue", "MULIASHI", "cluster_events", "seismic_moment", "moment_magnitude",
-    "b_value", "magnitude_frequency", "magnitude_statistics", "compare_with_reference", "write_catalogue_csv",
+    "b_value", "max_curvature_mc", "magnitude_frequency", "magnitude_statistics", "compare_with_reference", "write_catalogue_csv",
 ]
 
 CATALOGUE_DTYPE = np.dtype([
@@ -307,6 +307,15 @@ def b_value(magnitudes, mc: float | None = None, dm: float = 0.0) -> dict:
         raise ValueError("cannot fit a b-value: all magnitudes equal Mc")
     b = math.log10(math.e) / excess
     return {"b": b, "b_error": b / math.sqrt(m.size), "a": math.log10(m.size) + b * mc, "mc": mc, "n": int(m.size)}
+
+
+def max_curvature_mc(magnitudes, dm: float = 0.1) -> float:
+    """Magnitude of completeness by maximum curvature (Wiemer & Wyss 2000, *Bull. Seismol. Soc.
+    Am.* 90, 859-869): the lower edge of the ``dm`` bin holding the most events."""
+    mf = magnitude_frequency(magnitudes, dm)
+    if mf["counts"].size == 0:
+        raise ValueError(f"cannot find Mc: {NO_EVENTS}")
+    return float(mf["edges"][int(np.argmax(mf["counts"]))])
 
 
 def magnitude_frequency(magnitudes, dm: float = 0.1) -> dict[str, np.ndarray]:

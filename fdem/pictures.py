@@ -225,9 +225,10 @@ def magnitude_plot(path: str | os.PathLike, magnitudes: np.ndarray, dm: float = 
     """Left: histogram of event moment magnitudes (bins ``dm``), with the normal density of a
     reference catalogue's mean and standard deviation (e.g. :data:`fdem.events.MULIASHI`) scaled
     to the count. Right: ``N(>= M)`` on a log axis with the Gutenberg-Richter line
-    ``log10 N = a - b M`` fitted by maximum likelihood above ``mc`` (default the smallest M).
+    ``log10 N = a - b M`` fitted by maximum likelihood above ``mc`` (default: maximum
+    curvature, :func:`fdem.events.max_curvature_mc`).
     With no events the picture says so."""
-    from .events import b_value, magnitude_frequency
+    from .events import b_value, magnitude_frequency, max_curvature_mc
 
     m = np.asarray(magnitudes, float).ravel()
     m = m[np.isfinite(m)]
@@ -249,7 +250,8 @@ def magnitude_plot(path: str | os.PathLike, magnitudes: np.ndarray, dm: float = 
                      label=f"reference N({reference['mean']:.2f}, {reference['std']:.3g})")
         ax1.legend(fontsize=8)
         ax2.semilogy(e[:-1], mf["cumulative"], "o", color="C0", ms=4, label="N(>= M)")
-        if m.size >= 2 and np.ptp(m) > 0:
+        mc = max_curvature_mc(m, dm) if mc is None else mc
+        if (m >= mc).sum() >= 2 and np.ptp(m[m >= mc]) > 0:
             fit = b_value(m, mc=mc, dm=0.0)
             s = np.linspace(fit["mc"], m.max(), 50)
             ax2.semilogy(s, 10 ** (fit["a"] - fit["b"] * s), color="C3",

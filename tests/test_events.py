@@ -8,7 +8,7 @@ import pytest
 
 from fdem.cohesive import EVENT_DTYPE
 from fdem.events import (MULIASHI, b_value, cluster_events, compare_with_reference, magnitude_frequency,
-                         magnitude_statistics, moment_magnitude, seismic_moment, write_catalogue_csv)
+                         magnitude_statistics, max_curvature_mc, moment_magnitude, seismic_moment, write_catalogue_csv)
 
 MU, RHO, DSIGMA = 1.0e9, 2500.0, 1.0e5  # c_s = 632 m/s
 
@@ -91,6 +91,10 @@ def test_b_value_recovers_the_gutenberg_richter_slope_of_a_seeded_sample():
     # magnitudes binned to 0.1 (lowest bin centred on Mc = -4.0) with Utsu's half-bin correction
     mb = np.round((-4.05 + rng.exponential(1.0 / math.log(10.0), size=5000)) / 0.1) * 0.1
     assert b_value(mb, mc=-4.0, dm=0.1)["b"] == pytest.approx(1.0, rel=0.05)
+
+
+def test_max_curvature_mc_is_the_fullest_bin():
+    assert max_curvature_mc([-3.25, -3.15, -3.12, -3.11, -2.5], dm=0.1) == pytest.approx(-3.2)
 
 
 def test_magnitude_frequency_counts_and_cumulative():
