@@ -89,7 +89,7 @@ def _compressed_block(raw: bytes, compression: str | None, level: int) -> bytes:
     return head.tobytes() + b"".join(packed)
 
 
-def _select(data: dict | None, fields, where: str) -> dict:
+def _select(data: dict | None, fields) -> dict:
     """The entries of ``data`` named in ``fields`` (all when ``fields`` is None)."""
     data = data or {}
     if fields is None:
@@ -123,8 +123,8 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
         unknown = sorted(fields - known)
         if unknown:
             raise ValueError(f"fields {unknown} are not among the point/cell arrays {sorted(known)}")
-    point_data = _select(point_data, fields, "point")
-    cell_data = _select(cell_data, fields, "cell")
+    point_data = _select(point_data, fields)
+    cell_data = _select(cell_data, fields)
     path = Path(path)
     pts = np.asarray(points, dtype=np.float64)
     if pts.shape[1] == 2:

@@ -142,8 +142,8 @@ def failure_frame(path: str | os.PathLike, x: np.ndarray, triangles, displacemen
             sel = show & (mode == code)
             if sel.any():
                 ax.add_collection(LineCollection(segs[sel], colors=MODE_COLOURS[code], linewidths=lw, zorder=4))
-                handles.append(Line2D([], [], color=MODE_COLOURS[code], lw=2.5, path_effects=None,
-                                      label=f"{MODE_LABELS[code]}: {int(sel.sum())}", markeredgecolor="k"))
+                handles.append(Line2D([], [], color=MODE_COLOURS[code], lw=2.5,
+                                      label=f"{MODE_LABELS[code]}: {int(sel.sum())}"))
     if handles:
         leg = ax.legend(handles=handles[::-1], loc="upper left", fontsize=8, title="broken crack elements",
                         title_fontsize=8, facecolor="0.35", labelcolor="w", framealpha=0.9)
