@@ -95,11 +95,13 @@ def planar_slope_model(height: float, face_angle: float, plane_angle: float, cre
     ``toe_step`` [m] (default ``H/5``) continues the face below ``D`` down to the toe floor. The
     down-dip direction from ``D`` points into air only there: with the plane daylighting at the
     very toe of a horizontal floor (``toe_step=0``) the block's tip is driven into the floor
-    rock, which then holds the block; limit equilibrium assumes it free to slide out.
+    rock, which then holds the block over a finite slip; limit equilibrium assumes it free to
+    slide out.
 
-    Assumed extents: toe floor ``toe_length`` (default H) left of the toe, base ``base_depth``
-    (default H/2) below it, and a crest plateau reaching ``crest_length`` (default H beyond the
-    point where the plane or the crack meets the upper surface) behind the crest. ``D`` lies at
+    Assumed extents, compact since the block's equilibrium does not depend on them: toe floor
+    ``toe_length`` (default 0.3 H) left of the toe, base ``base_depth`` (default 0.3 H) below
+    it, and a crest plateau reaching ``crest_length`` (default H/2 beyond the point where the
+    plane or the crack meets the upper surface) behind the crest. ``D`` lies at
     ``(toe_length + toe_step cot psi_f, base_depth + toe_step)``.
     """
     H, pf, pp = float(height), float(face_angle), float(plane_angle)
@@ -122,9 +124,9 @@ def planar_slope_model(height: float, face_angle: float, plane_angle: float, cre
         if b <= 0 or reach * tan_p >= H:
             raise ValueError(f"planar slope: the tension crack must stand behind the crest (b > 0) and reach the "
                              f"plane below the surface (b < {H * cot_p - run_above:.6g} m), got b = {b} m")
-    toe_length = H if toe_length is None else float(toe_length)
-    base_depth = 0.5 * H if base_depth is None else float(base_depth)
-    crest_length = (reach - run_above) + H if crest_length is None else float(crest_length)
+    toe_length = 0.3 * H if toe_length is None else float(toe_length)
+    base_depth = 0.3 * H if base_depth is None else float(base_depth)
+    crest_length = (reach - run_above) + 0.5 * H if crest_length is None else float(crest_length)
     if crest_length <= reach - run_above:
         raise ValueError(f"planar slope: crest_length {crest_length} m must exceed "
                          f"{reach - run_above:.6g} m, where the joints meet the upper surface")

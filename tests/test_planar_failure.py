@@ -153,3 +153,50 @@ def test_joint_daylights_in_the_face_and_reaches_the_surface_or_the_crack(crack)
     block = label == label[np.argmin(np.linalg.norm(c - (d + [0.5, 1.0]), axis=1))]
     area = topo.triangle_area0[block].sum()
     assert area * 25e3 == pytest.approx(le.W, rel=1e-9)      # its weight is the LE weight W
+
+
+# ----------------------------------------------------------------------------- strength reduction
+
+
+def _case():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "cases" / "planar_failure.py"
+    spec = importlib.util.spec_from_file_location("planar_failure_case", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module        # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def fos_runs():
+    """Strength-reduction FoS of two geometries on coarse meshes (a few hundred triangles),
+    bisected on [1.0, 1.8] to a bracket 0.025 wide."""
+    case = _case()
+    return {name: case.run_case(name, size=1.5, lower=1.0, upper=1.8, tol=0.03)
+            for name in ("no_crack", "tension_crack")}
+
+
+@pytest.mark.parametrize("name", ["no_crack", "tension_crack"])
+def test_strength_reduction_fos_matches_hoek_bray(fos_runs, name):
+    r = fos_runs[name]
+    lo, hi = r["bracket"]
+    assert hi - lo <= 0.03 and lo <= r["fos"] <= hi
+    # verification.md: within 10 % of the limit-equilibrium value.
+    assert r["fos"] == pytest.approx(r["analytic_fos"], rel=0.10)
+    # Every trial below the bracket settled, every trial above it did not.
+    for t in r["trials"]:
+        assert t["stable"] == (t["factor"] <= lo)
+    # The slope failed along its joints: no intact-rock element (tag 0) yielded, none broke.
+    assert set(r["failure_surface_tags"]) <= {1, 2} and 1 in r["failure_surface_tags"]
+    assert r["n_broken_first_failure"] == 0
+
+
+def test_tension_crack_lowers_the_fos_as_limit_equilibrium_says(fos_runs):
+    # Hoek-Bray: 1.396 without a crack, 1.302 with the crack 2 m behind the crest.
+    a, b = fos_runs["no_crack"], fos_runs["tension_crack"]
+    assert b["analytic_fos"] < a["analytic_fos"]
+    assert b["bracket"][1] <= a["bracket"][0]
