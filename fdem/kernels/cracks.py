@@ -31,9 +31,11 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``status : (n,) int8``
     0 while the element has never left the elastic range (its ``state`` row is then all
     zero and is not read), 1 after it first damaged or slid.
-``state : (n, 6) float64``
+``state : (n, 8) float64``
     ``[D, kappa, s_pl]`` of end 0 then of end 1: damage (never decreases, >= 1 is fully
-    damaged), accumulated plastic slip [m], signed plastic slip [m].
+    damaged), accumulated plastic slip [m], signed plastic slip [m]; then the shear traction
+    applied at the last update of end 0 and of end 1 [N/m per end] (for the trapezoidal
+    booking of plastic work, see :func:`point_law`).
 ``diss : (n, 3) float64``
     Energy dissipated by each element [J per metre of thickness]: mode-I (normal damage),
     mode-II (cohesive part of the shear strength), friction inside the intact element.
@@ -63,7 +65,9 @@ MUNJIZA = 0
 LINEAR = 1
 
 N_CONST = 8
-N_STATE = 6
+N_STATE = 8
+UNKNOWN_TRACTION = -1.0e308
+"""Sentinel for "no previous shear traction stored" (a NaN test would not survive fastmath)."""
 PARALLEL_MIN = 4096
 """Below this many live elements the serial loop is used (a parallel region costs more)."""
 
@@ -92,11 +96,13 @@ def softening(D, kind):
 
 
 @njit(cache=True, fastmath=True)
-def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
+def point_law(o, s, D, kap, sp, tp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
     """Cohesive law at one integration point: tractions and the updated state.
 
     Inputs are the opening ``o`` (>0 opens) and slip ``s`` [m] at the point, the state
-    ``D, kap, sp`` and the constants: penalties ``Kn, Kt`` (``Kc`` in compression), peak opening ``op = Ft/Kn``,
+    ``D, kap, sp``, the shear traction ``tp`` applied at the previous update
+    (:data:`UNKNOWN_TRACTION` if unknown)
+    and the constants: penalties ``Kn, Kt`` (``Kc`` in compression), peak opening ``op = Ft/Kn``,
     cohesion ``C``, ``tanphi``, ``inv_dO = 1/(o_r - o_p)``, ``inv_dK = 1/kappa_r``, softening
     ``kind``. Stiffnesses, strengths and energies are per unit area, or all multiplied by the
     point weight ``w`` (the law is homogeneous in that scaling).
@@ -120,6 +126,14 @@ def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
     The shear strength uses the damage of the previous plastic slip (one-step lag, an O(step)
     error that vanishes with the explicit time step).
 
+    Plastic work is booked by the trapezoidal rule of the central-difference ledger: over an
+    update from traction ``tp`` to ``tau = sgn F`` with plastic slip ``dk``, the work of the
+    applied tractions minus the change of stored energy is ``dW = dk (F + sgn tp) / 2``
+    (``F dk`` in steady sliding; ``F dk`` too when ``tp`` is unknown), shared between the
+    cohesive part ``z C`` and friction in proportion. In dynamic sliding the strength ``F``
+    changes from step to step with the normal traction, and ``F dk`` alone leaves a
+    first-order error in the ledger.
+
     Returns ``(sigma, tau, D', kap', sp', dW_I, dW_II, dW_fric)``: tractions (tension and
     slip-resisting positive) and the energy dissipated in this update by normal damage, by the
     cohesive part and by friction [J/m^2, or J when the constants carry ``w``].
@@ -130,11 +144,11 @@ def point_law(o, s, D, kap, sp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
     if D == 0.0 and kap == 0.0 and o <= op:
         if abs(ttr) <= C + max(-sig_e, 0.0) * tanphi:
             return sig_e, ttr, 0.0, 0.0, sp, 0.0, 0.0, 0.0
-    return _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
+    return _point_law_inelastic(o, D, kap, sp, tp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
 
 
 @njit(cache=True, fastmath=True)
-def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
+def _point_law_inelastic(o, D, kap, sp, tp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
     """Damaging / sliding branch of :func:`point_law` (same law, general case)."""
     Ft = Kn * op
     dO = 1.0 / inv_dO
@@ -172,8 +186,15 @@ def _point_law_inelastic(o, D, kap, sp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_d
     sgn = 1.0 if ttr >= 0.0 else -1.0
     tau = ttr - sgn * excess
     dk = excess / Kt
-    dWII = z * C * dk
-    dWf = fric * dk
+    dWII = 0.0
+    dWf = 0.0
+    if dk > 0.0:
+        work = F * dk if tp == UNKNOWN_TRACTION else 0.5 * dk * (F + sgn * tp)
+        if F > 0.0:
+            dWII = work * (z * C / F)
+            dWf = work * (fric / F)
+        else:
+            dWII = work
     return sig, tau, Dn, kap + dk, sp + sgn * dk, dWI, dWII, dWf
 
 
@@ -235,21 +256,28 @@ def element_update(c, x, nodes, const, status, state, diss, offset):
                & (abs(tau0) <= C + max(-sig0, 0.0) * tanphi) & (abs(tau1) <= C + max(-sig1, 0.0) * tanphi))
     broke = False
     if not elastic:
+        tp0 = UNKNOWN_TRACTION
+        tp1 = UNKNOWN_TRACTION
+        if status[c] != 0:
+            tp0 = state[c, 6]
+            tp1 = state[c, 7]
         status[c] = 1
         signed_inv_dO = const[c, 5]
         inv_dO = abs(signed_inv_dO)
         inv_dK = const[c, 6]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
         sig0, tau0, Dn0, kn0, sn0, wI0, wII0, wf0 = point_law(
-            o0, s0, state[c, 0], state[c, 1], state[c, 2], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
+            o0, s0, state[c, 0], state[c, 1], state[c, 2], tp0, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
         sig1, tau1, Dn1, kn1, sn1, wI1, wII1, wf1 = point_law(
-            o1, s1, state[c, 3], state[c, 4], state[c, 5], Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
+            o1, s1, state[c, 3], state[c, 4], state[c, 5], tp1, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
         state[c, 0] = Dn0
         state[c, 1] = kn0
         state[c, 2] = sn0
         state[c, 3] = Dn1
         state[c, 4] = kn1
         state[c, 5] = sn1
+        state[c, 6] = tau0
+        state[c, 7] = tau1
         diss[c, 0] += wI0 + wI1
         diss[c, 1] += wII0 + wII1
         diss[c, 2] += wf0 + wf1
@@ -546,14 +574,15 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, active):
             kap = state[c, 3 * end + 1]
             sp = state[c, 3 * end + 2]
             before = _end_energy(o, s, D, sp, const[c])
-            _, _, Dn, kn, sn, wI, wII, wf = point_law(
-                o, s, D, kap, sp, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc)
+            _, tau, Dn, kn, sn, wI, wII, wf = point_law(
+                o, s, D, kap, sp, UNKNOWN_TRACTION, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc)
             if Dn == D and kn == kap:
                 continue
             status[c] = 1
             state[c, 3 * end] = Dn
             state[c, 3 * end + 1] = kn
             state[c, 3 * end + 2] = sn
+            state[c, 6 + end] = tau
             released = max(before - _end_energy(o, s, Dn, sn, const[c]), 0.0)
             share = wI + wII + wf
             if share > 0.0:

@@ -1,0 +1,84 @@
+"""Stages, the slope workflow and the energy ledger through a whole reduction schedule.
+
+The scene is the planar-failure slope of ``cases/planar_failure.py`` at a coarse size: a block on
+a joint that daylights in the face, static geostatic start.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdem.scenes import planar_slope_model
+from fdem.solver import Damping, NO_DAMPING
+from fdem.stages import Convergence, Failure, Stage, response_time, run_stage
+from fdem.workflow import SlopeWorkflow, reduction_steps, run_slope_workflow
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
+import planar_failure as pf  # noqa: E402
+
+SIZE = 1.6
+
+
+def scene(geometry="no_crack"):
+    return pf.planar_failure_simulation(planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES[geometry]), SIZE)
+
+
+def test_stage_rules_are_checked_before_anything_runs():
+    with pytest.raises(ValueError, match="can never end"):
+        Stage("forever")
+    with pytest.raises(ValueError, match="max_time"):
+        Stage("x", max_time=float("nan"), converge=Convergence())
+    with pytest.raises(ValueError, match="at least one"):
+        Convergence(unbalanced_ratio=None)
+    with pytest.raises(ValueError, match="damping"):
+        Stage("x", duration=1.0, damping=0.8)
+    assert reduction_steps(0.3) == pytest.approx([1 / 0.9, 1 / 0.8, 1 / 0.7, 1 / 0.6, 1 / 0.5, 1 / 0.4, 1 / 0.3])
+
+
+def test_static_start_converges_and_a_weak_slope_fails():
+    """From the static start the slope settles within the cap (a few joint elements at the
+    daylight point are above their strength at F = 1 and slide a little); far below its
+    strength the block slides and the failure rule fires."""
+    s = scene()
+    sim = s.sim
+    T = response_time(sim.model)
+    r = run_stage(sim, Stage("equilibrium", max_time=10 * T, converge=Convergence(unbalanced_ratio=1e-4),
+                             damping=Damping.quasi_static()), frames=False)
+    assert r.reason == "converged" and r.unbalanced_ratio <= 1e-4
+    assert r.max_displacement < 1e-3
+    # Far below its strength the block slides. Undamped, the displacement rule fires within a
+    # fraction of a second; under local damping, which resists sliding on frictional joints
+    # (it acts on each node's stick-slip force), the block creeps and the stage does not
+    # converge: non-convergence within the cap counts as failure.
+    snap_x = sim.state.x.copy()
+    r = run_stage(sim, Stage("weak", max_time=10 * T, reduction=4.0, converge=Convergence(),
+                             fail=Failure(displacement=0.02), damping=Damping.quasi_static()), frames=False)
+    assert r.reason == "capped" and r.unbalanced_ratio > 100 * 1e-4
+    moved = np.linalg.norm(sim.state.x - snap_x, axis=1)[s.block_nodes]
+    assert moved.min() > 1e-3   # the whole block moves
+    r = run_stage(sim, Stage("weak_dynamic", max_time=10 * T, converge=Convergence(),
+                             fail=Failure(displacement=0.02)), frames=False)
+    assert r.reason == "failed" and r.max_displacement > 0.02
+
+
+def test_ledger_closes_through_a_reduction_schedule_with_breakage_and_contact():
+    """Damped reduction steps until the block fails, then an undamped runout: elements soften,
+    break and slide while the factor keeps changing, contact takes the broken faces; the ledger
+    stays closed to 1 % of the energy scale."""
+    s = scene("tension_crack")   # the crack breaks open when the block moves
+    sim = s.sim
+    T = response_time(sim.model)
+    wf = SlopeWorkflow(factors=(1.2, 1.6, 2.2, 3.0), step_time=8 * T, fail_displacement=0.02,
+                       runout_time=0.6)
+    summary = run_slope_workflow(sim, wf)
+    assert summary["equilibrium"] == "converged"
+    assert summary["outcome"] == "failed"
+    assert s.cracks.broken.sum() > 0 and s.contact.n_touching > 0
+    # reduced after breakage: the factor now on every interface is the failing one
+    assert s.cracks.interfaces.reduction == summary["failed_at_factor"]
+    errors = np.array([abs(row["balance_error_relative"]) for row in sim.history])
+    assert errors.max() < 0.01, f"ledger error {errors.max():.3g} of the energy scale"
+    assert summary["stages"][-1]["name"] == "runout"
