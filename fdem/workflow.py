@@ -4,8 +4,9 @@ Composed of :mod:`fdem.stages` so that a case script only builds the model and c
 :func:`run_slope_workflow`:
 
 1. **Equilibrium check** at ``F = 1`` (the model must come from a geostatic start,
-   :func:`fdem.geostatic.geostatic_start`): a damped stage that must converge at once; a
-   slope that does not stand at ``F = 1`` is reported, not hidden.
+   :func:`fdem.geostatic.geostatic_start`): a damped stage that must converge; a slope that
+   does not stand at ``F = 1`` is reported, not hidden. Damped stages use
+   :func:`fdem.stages.fundamental_damping` (mass-proportional, critical for the fundamental mode).
 2. **Factor of safety** (optional): :func:`fdem.stages.factor_of_safety` from that state.
 3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
    damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
@@ -24,8 +25,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .solver import NO_DAMPING, Damping, Simulation
-from .stages import (Convergence, Failure, Stage, crack_set_of, factor_of_safety, response_time, run_stage)
+from .solver import NO_DAMPING, Simulation
+from .stages import (Convergence, Failure, Stage, crack_set_of, factor_of_safety, fundamental_damping,
+                     response_time, run_stage)
 
 __all__ = ["SlopeWorkflow", "run_slope_workflow", "reduction_steps"]
 
@@ -94,7 +96,7 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     step_time = wf.step_time or 10.0 * T
     fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
-    damped = Damping.quasi_static()
+    damped = fundamental_damping(sim)
     summary: dict = {"response_time_s": T, "stages": [], "fos": None, "failed_at_factor": None}
 
     def record(result):
