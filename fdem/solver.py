@@ -150,6 +150,9 @@ class EnergyLedger:
         self.external_moment0 = external_moment0
         self.roundoff = roundoff
         self.done = dict.fromkeys(self.CUMULATIVE, 0.0)  # sums over completed steps
+        # Potential energy added by changing gravity at fixed positions (Simulation.set_gravity):
+        # work done on the system by whoever changes g, booked like boundary work.
+        self.gravity_change_work = 0.0
         self.first_early: dict[str, float] | None = None
         self.total0: float | None = None
         self.scale = 0.0
@@ -178,11 +181,13 @@ class EnergyLedger:
         held = row["kinetic"] + row["strain"] + row["gravity_potential"] + row["load_potential"]
         spent = row["damping_dissipation"] + row["viscous_dissipation"]
         interactions = sum(provider_terms.values()) if providers_complete else -row["interaction_work"]
-        total = held + spent + interactions - row["boundary_work"]
+        row["gravity_change_work"] = self.gravity_change_work
+        total = held + spent + interactions - row["boundary_work"] - self.gravity_change_work
         if self.total0 is None:
             self.total0 = total
         size = (abs(row["kinetic"]) + abs(row["strain"]) + abs(row["gravity_potential"]) + abs(row["load_potential"])
-                + abs(spent) + abs(row["boundary_work"]) + sum(abs(t) for t in provider_terms.values()))
+                + abs(spent) + abs(row["boundary_work"]) + abs(self.gravity_change_work)
+                + sum(abs(t) for t in provider_terms.values()))
         self.scale = max(self.scale, size, self.roundoff)
         row["total"] = total
         row["balance_error"] = total - self.total0
@@ -281,6 +286,7 @@ class Simulation:
         self._good = self.state.copy()
         self._provider_terms: tuple[dict[str, float], bool] = ({}, True)
         self.last_row: dict | None = None
+        self.kinetic_peak = 0.0  # largest kinetic energy of any step since the last history row
         for p in providers:
             self.add_provider(p)
         self.dt = self._choose_dt()
@@ -323,6 +329,24 @@ class Simulation:
                 f"automatic {self.safety * crit:.6g} s (safety factor {self.safety})")
         return float(self.user_dt)
 
+    def set_gravity(self, gx: float, gy: float) -> None:
+        """Change gravity [m/s^2] during a run (a gravity-increase trigger), keeping the ledger closed.
+
+        The potential energy ``-sum m g . (x - x0)`` jumps at fixed positions by
+        ``-sum m (g_new - g_old) . (x - x0)``: that is work done on the system by the change,
+        booked in the ledger as ``gravity_change_work`` (like the work of supports). Masses do not
+        change: a gravity factor ``k`` loads the slope as a density factor ``k`` would in statics,
+        with the dynamics of the real mass.
+        """
+        g_new = np.array([gx, gy], dtype=float)
+        if not np.all(np.isfinite(g_new)):
+            raise ValueError(f"gravity must be finite, got ({gx}, {gy}) m/s^2")
+        dg = g_new - self.gravity
+        m = self.state.mass[:, None]
+        self.ledger.gravity_change_work += -float((m * dg * (self.state.x - self.x0)).sum())
+        self.ledger.gravity_moment0 = float((m * g_new * self.x0).sum())
+        self.gravity = g_new
+
     # ------------------------------------------------------------------ stepping
     def step(self, damping: Damping = NO_DAMPING, ledger: bool = False) -> tuple:
         """Advance one step; returns the kernel sums (see :data:`fdem.kernels.integration.LEDGER_FIELDS`).
@@ -350,10 +374,10 @@ class Simulation:
         damped = alpha != 0.0 or local != 0.0
         if self.exploded and not (ledger or self.use_viscous or self.use_external):
             # fast path (most steps of a dynamic or damped stage): no state energies needed
-            r_e, r_l, i_e, i_l, d_e, d_l, n_bad = step_exploded_elastic(
+            r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
                 x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
                 self.flags, self.v_prescribed, gx, gy, dt, self._partial)
-            sums = (0.0, 0.0, 0.0, 0.0, d_e, d_l, 0.0, 0.0, r_e, r_l, i_e, i_l, n_bad)
+            sums = (0.0, kin, 0.0, 0.0, d_e, d_l, 0.0, 0.0, r_e, r_l, i_e, i_l, n_bad)
         elif self.exploded:
             sums = step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
                                  self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous, ledger,
@@ -371,6 +395,8 @@ class Simulation:
                 v_l = 0.5 * dt * viscous_power(v, self.triangles, self.tc, self._viscous_stress)
             sums = (strain, kin, gm, em, d_e, d_l, v_e, v_l, r_e, r_l, i_e, i_l, n_bad)
         step_before, time_before = st.step, st.time
+        if self.exploded or ledger:  # the exploded kernels sum the kinetic energy every step
+            self.kinetic_peak = max(self.kinetic_peak, float(sums[1]))
         st.step += 1
         st.time += dt
         if ledger:
@@ -473,6 +499,10 @@ class Simulation:
         self.ledger.add_step(early, late)
         row = {"stage": self._stage, "step": int(step), "time": float(time), "dt": float(self.dt)}
         row.update(ledger)
+        # kinetic energy's peak over the steps since the previous row (every step is summed):
+        # the history's peak is right even when rows are sparse
+        row["kinetic_peak"] = max(self.kinetic_peak, float(row["kinetic"]))
+        self.kinetic_peak = 0.0
         for name, fn in self.monitors.items():
             row[name] = fn(self)
         self.history.append(row)
@@ -656,7 +686,9 @@ class Simulation:
             "ledger": {"done": dict(led.done), "first_early": None if led.first_early is None else dict(led.first_early),
                        "total0": led.total0, "scale": float(led.scale), "last": dict(led.last),
                        "gravity_moment0": float(led.gravity_moment0),
-                       "external_moment0": float(led.external_moment0)},
+                       "external_moment0": float(led.external_moment0),
+                       "gravity_change_work": float(led.gravity_change_work)},
+            "kinetic_peak": float(self.kinetic_peak),
             "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
             "provider_terms": [dict(terms), bool(complete)],
             "last_row": None if self.last_row is None else dict(self.last_row), "dt": float(self.dt),
@@ -698,6 +730,8 @@ class Simulation:
         led.last = dict(s["last"])
         led.gravity_moment0 = float(s["gravity_moment0"])
         led.external_moment0 = float(s["external_moment0"])
+        led.gravity_change_work = float(s.get("gravity_change_work", 0.0))
+        self.kinetic_peak = float(d.get("kinetic_peak", 0.0))
         self.history[:] = [dict(r) for r in d["history"]]
         self._frames = int(d["frames"])
         self._stage = str(d["stage"])

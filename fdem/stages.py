@@ -42,7 +42,7 @@ import numpy as np
 from .solver import NO_DAMPING, Damping, Simulation
 
 __all__ = ["Convergence", "Failure", "Stage", "StageResult", "run_stage", "response_time", "interfaces_of",
-           "crack_set_of", "fundamental_damping", "default_trial_stage", "StrengthReduction", "Trial", "FoSResult", "factor_of_safety"]
+           "crack_set_of", "fundamental_damping", "default_trial_stage", "StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "factor_of_safety"]
 
 
 # ----------------------------------------------------------------------------- rules
@@ -113,6 +113,9 @@ class Stage:
         at the stage start to ``1/F_end`` over ``seconds`` of simulated time, updated at every
         check (the four-slope paper's schedule, 10 % of the initial strength per 10,000 steps
         of 2 us, is ``1/F`` falling by 5 per second)
+    gravity_factor : gravity set to this multiple of ``base_gravity`` when the stage starts
+        (``None``: keep); :meth:`fdem.solver.Simulation.set_gravity` books the change
+    base_gravity : (gx, gy) [m/s^2] the factor multiplies (default: the model's gravity)
     hold_elastic : hold the crack elements elastic during the stage (``None``: keep)
     check_interval : simulated time [s] between checks of the rules (default ``T / 40``)
     output_interval : simulated time [s] between output frames (default: 4 per stage)
@@ -127,6 +130,8 @@ class Stage:
     damping: Damping = NO_DAMPING
     reduction: float | None = None
     reduction_ramp: tuple[float, float] | None = None
+    gravity_factor: float | None = None
+    base_gravity: tuple[float, float] | None = None
     hold_elastic: bool | None = None
     check_interval: float | None = None
     output_interval: float | None = None
@@ -138,6 +143,8 @@ class Stage:
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
         _positive_or_none(self.max_time, f"stage {self.name!r}: max_time")
         _positive_or_none(self.reduction, f"stage {self.name!r}: reduction")
+        if self.gravity_factor is not None and not (math.isfinite(self.gravity_factor) and self.gravity_factor >= 0):
+            raise ValueError(f"stage {self.name!r}: gravity_factor must be finite and >= 0, got {self.gravity_factor!r}")
         _positive_or_none(self.check_interval, f"stage {self.name!r}: check_interval")
         _positive_or_none(self.output_interval, f"stage {self.name!r}: output_interval")
         if self.duration is None and self.converge is None and self.fail is None:
@@ -244,6 +251,9 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         cracks.hold_elastic(stage.hold_elastic)
     if stage.reduction is not None:
         cracks.interfaces.set_reduction(stage.reduction)
+    if stage.gravity_factor is not None:
+        base = np.asarray(stage.base_gravity if stage.base_gravity is not None else sim.model.gravity, float)
+        sim.set_gravity(*(stage.gravity_factor * base))
     nodes = _monitor_nodes(sim, stage.monitor)
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     fail = stage.fail
@@ -341,6 +351,35 @@ class StrengthReduction:
 
     def current(self, sim: Simulation) -> float:
         return interfaces_of(sim).reduction
+
+
+class GravityIncrease:
+    """Trigger of the factor-of-safety search: gravity multiplied by the factor ``k`` (larger
+    is heavier), from the model's gravity, as the Muliashi study raises the density ten-fold
+    (``shared/cases.md`` B). The critical gravity factor is the factor of safety against
+    self-weight. :meth:`fdem.solver.Simulation.set_gravity` books each change in the ledger."""
+
+    name = "gravity increase"
+
+    def __init__(self, base_gravity=None):
+        self.base = None if base_gravity is None else np.asarray(base_gravity, float)
+
+    def _base(self, sim: Simulation) -> np.ndarray:
+        if self.base is None:
+            self.base = np.asarray(sim.model.gravity, float).copy()
+            if not np.any(self.base):
+                raise ValueError("gravity increase: the model has no gravity to multiply")
+        return self.base
+
+    def apply(self, sim: Simulation, factor: float) -> None:
+        sim.set_gravity(*(factor * self._base(sim)))
+
+    def reset(self, sim: Simulation, factor: float) -> None:
+        sim.set_gravity(*(factor * self._base(sim)))
+
+    def current(self, sim: Simulation) -> float:
+        base = self._base(sim)
+        return float(np.dot(sim.gravity, base) / np.dot(base, base))
 
 
 @dataclass

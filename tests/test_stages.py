@@ -82,3 +82,29 @@ def test_ledger_closes_through_a_reduction_schedule_with_breakage_and_contact():
     errors = np.array([abs(row["balance_error_relative"]) for row in sim.history])
     assert errors.max() < 0.01, f"ledger error {errors.max():.3g} of the energy scale"
     assert summary["stages"][-1]["name"] == "runout"
+
+
+def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
+    """Planar block, c = 20 kPa, phi = 30 deg on a 35 deg plane: limit equilibrium fails when
+    gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
+    cohesion does not grow with the weight). The gravity-increase search must find it within
+    10 %, and the ledger must stay closed while gravity changes under a moving slope."""
+    from fdem.stages import GravityIncrease, factor_of_safety
+
+    s = scene()
+    sim = s.sim
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"])
+    psi, phi = np.radians(35.0), np.radians(pf.JOINT_FRICTION)
+    k_exact = pf.JOINT_COHESION * le.plane_length / (le.weight * (np.sin(psi) - np.cos(psi) * np.tan(phi)))
+    result = factor_of_safety(sim, lower=1.0, upper=5.0, tol=0.1, trigger=GravityIncrease())
+    assert result.bracket[0] < result.bracket[1] <= result.bracket[0] + 0.1 + 1e-12
+    assert result.fos == pytest.approx(k_exact, rel=0.10), (result.fos, k_exact)
+    assert np.allclose(sim.gravity, sim.model.gravity)          # back to where it started
+    # gravity doubled, then raised past failure while the block moves, undamped
+    T = response_time(sim.model)
+    run_stage(sim, Stage("heavier", duration=2 * T, gravity_factor=2.0), frames=False)
+    run_stage(sim, Stage("failing", duration=4 * T, gravity_factor=1.3 * k_exact), frames=False)
+    row = sim.history[-1]
+    assert row["gravity_change_work"] != 0.0 and row["kinetic"] > 0.0
+    errors = np.array([abs(r["balance_error_relative"]) for r in sim.history])
+    assert errors.max() < 0.01, f"ledger error {errors.max():.3g} of the energy scale"

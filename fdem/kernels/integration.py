@@ -109,7 +109,8 @@ def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_d
     writes ``v[i]`` and ``x[i]``. Returns ``(v_new_x, v_new_y, kinetic, gravity_moment,
     external_moment, damping_early, damping_late, reaction_early, reaction_late,
     interaction_early, interaction_late)`` (halves already multiplied by ``dt/2``); the
-    first three ledger values are computed only if ``ledger``.
+    moments are computed only if ``ledger``, the kinetic energy every step (a few flops: it
+    lets the solver follow the kinetic energy's peak step by step).
     """
     px, py = x[i, 0], x[i, 1]
     ux, uy = v[i, 0], v[i, 1]
@@ -148,11 +149,10 @@ def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_d
     if use_int:
         ie = h * (ix * ux + iy * uy)
         il = h * (ix * nx + iy * ny)
-    kinetic = 0.0
+    kinetic = 0.5 * mass * (ux * nx + uy * ny)
     gmom = 0.0
     emom = 0.0
     if ledger:
-        kinetic = 0.5 * mass * (ux * nx + uy * ny)
         gmom = mass * (gx * px + gy * py)
         emom = ex * px + ey * py
     return nx, ny, kinetic, gmom, emom, de, dl, re, rl, ie, il
@@ -210,8 +210,8 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
             for k in range(3):  # one inlined call site keeps the compile time down
                 a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, im, gx, gy, dt, alpha, c_keep, c_div,
                                  local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
+                kin += a[2]
                 if ledger:
-                    kin += a[2]
                     gmom += a[3]
                     emom += a[4]
                 if damped:
@@ -282,7 +282,7 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
     arguments compile to specialisations without that code (numba prunes the branches).
 
     Returns ``(reaction_early, reaction_late, interaction_early, interaction_late,
-    damping_early, damping_late, n_inverted)``.
+    damping_early, damping_late, n_inverted, kinetic)`` (``kinetic`` as in :data:`LEDGER_FIELDS`).
     """
     n_tri = tc.shape[0]
     nb = partial.shape[0]
@@ -294,6 +294,7 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
         i_l = 0.0
         d_e = 0.0
         d_l = 0.0
+        kin = 0.0
         n_bad = 0
         for t in range(blk * BLOCK, min(n_tri, (blk + 1) * BLOCK)):
             i = 3 * t
@@ -331,6 +332,7 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
             c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, im, gx, gy, dt, damping, flags, v_prescribed)
             r_e += a[0] + b[0] + c[0]
             r_l += a[1] + b[1] + c[1]
+            kin += 0.5 * m * (a[2] * a[4] + a[3] * a[5] + b[2] * b[4] + b[3] * b[5] + c[2] * c[4] + c[3] * c[5])
             if damping is not None:
                 d_e += a[6] + b[6] + c[6]
                 d_l += a[7] + b[7] + c[7]
@@ -344,8 +346,9 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
         partial[blk, 4] = d_e
         partial[blk, 5] = d_l
         partial[blk, 6] = n_bad
-    s = partial[:, :7].sum(axis=0)
-    return s[0], s[1], s[2], s[3], s[4], s[5], int(s[6])
+        partial[blk, 7] = kin
+    s = partial[:, :8].sum(axis=0)
+    return s[0], s[1], s[2], s[3], s[4], s[5], int(s[6]), s[7]
 
 
 @njit(fastmath=FASTMATH, cache=True)
