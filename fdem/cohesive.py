@@ -97,6 +97,16 @@ class CrackProperties:
         (default ``phi``)
     softening : ``"munjiza"`` (Evans-Marathe shape, default) or ``"linear"``
     name : label used in error messages
+    dilation_angle : joint dilation angle ``psi`` [deg], in ``[0, phi]`` (default 0: none).
+        While an end slides plastically its faces separate normally by
+        ``d = tan(psi) min(kappa, u_lim)`` (``kappa`` the accumulated plastic slip): the law
+        sees the effective opening ``o - d``, so under normal confinement sliding raises the
+        compression (and the friction), and free faces open. ``psi <= phi`` keeps the
+        dissipation ``c z + sigma_n (tan(phi) - tan(psi))`` per unit slip non-negative once the
+        cohesion is gone. See ``docs/cohesive.md`` (Joint dilation).
+    dilation_limit : plastic slip ``u_lim`` [m] beyond which the joint stops dilating (asperities
+        sheared off; the largest dilatant opening is ``tan(psi) u_lim``); finite, >= 0, and > 0
+        when ``dilation_angle > 0``
     """
 
     f_t: float
@@ -111,6 +121,8 @@ class CrackProperties:
     phi_res: float | None = None
     softening: str = "munjiza"
     name: str = ""
+    dilation_angle: float = 0.0
+    dilation_limit: float = 0.0
 
     def __post_init__(self) -> None:
         who = f"crack property set {self.name!r}" if self.name else "crack property set"
@@ -140,6 +152,23 @@ class CrackProperties:
                 raise ValueError(f"{who}: penalty {attr} must be positive and finite, got {v}")
         if self.softening not in SOFTENING_KINDS:
             raise ValueError(f"{who}: softening must be one of {sorted(SOFTENING_KINDS)}, got {self.softening!r}")
+        for attr in ("dilation_angle", "dilation_limit"):
+            v = getattr(self, attr)
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+                raise ValueError(f"{who}: {attr} must be a finite number, got {v!r}")
+        if not 0.0 <= self.dilation_angle < 90.0:
+            raise ValueError(f"{who}: dilation_angle psi must be in [0, 90) deg, got {self.dilation_angle}")
+        if self.dilation_angle > self.phi:
+            raise ValueError(
+                f"{who}: dilation_angle psi = {self.dilation_angle} deg exceeds the friction angle phi = {self.phi} deg: "
+                f"a sliding joint would then dissipate c z + sigma_n (tan(phi) - tan(psi)) < 0 per unit slip once "
+                f"the cohesion is gone (energy created); include the asperity angle in phi (Patton: phi = phi_b + i)")
+        if self.dilation_limit < 0.0:
+            raise ValueError(f"{who}: dilation_limit u_lim must not be negative, got {self.dilation_limit} m")
+        if self.dilation_angle > 0.0 and self.dilation_limit <= 0.0:
+            raise ValueError(
+                f"{who}: dilation_angle = {self.dilation_angle} deg needs a dilation_limit u_lim > 0 [m], the plastic "
+                f"slip beyond which the joint stops dilating (with u_lim = 0 it would never dilate)")
 
     def stiffness(self, length0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal and tangential stiffness per unit area ``(k_n, k_t)`` [Pa/m] of elements of
@@ -159,6 +188,11 @@ class CrackProperties:
     @property
     def tan_phi(self) -> float:
         return math.tan(math.radians(self.phi))
+
+    @property
+    def tan_psi(self) -> float:
+        """Dilation coefficient ``tan(psi)`` [-]."""
+        return math.tan(math.radians(self.dilation_angle))
 
     @property
     def tan_phi_res(self) -> float:
@@ -315,6 +349,10 @@ class CrackSet:
         self.props = np.zeros((n_tags, 7))
         for t, p in self.property_sets.items():
             self.props[t] = [p.f_t, p.c, p.tan_phi, p.G_I, p.G_II, SOFTENING_KINDS[p.softening], p.tan_phi_res]
+        # Dilation by tag: [tan(psi), u_lim]; geometric, not reduced (see _fill_constants).
+        self.dilation = np.zeros((n_tags, K.N_DIL))
+        for t, p in self.property_sets.items():
+            self.dilation[t] = [p.tan_psi, p.dilation_limit]
         self.kn = np.empty(n)
         self.kt = np.empty(n)
         for t in present:
@@ -352,6 +390,7 @@ class CrackSet:
         self._state = np.zeros((n, K.N_STATE))
         self._diss = np.zeros((n, 3))
         self._offset = np.zeros((n, 4))
+        self._dil = np.zeros((n, K.N_DIL))
         self._fill_constants()
         self.interfaces.subscribe(self._fill_constants, check=self._check_snap_back)
         self.broken = np.zeros(n, dtype=bool)
@@ -444,6 +483,7 @@ class CrackSet:
             # Peak opening and cohesion out of reach: every update takes the elastic fast path.
             C[:, 2] = ELASTIC_ONLY_LIMIT
             C[:, 3] = ELASTIC_ONLY_LIMIT
+        self._dil[:] = self._dilation_constants(tanphi)[self._perm]
         new = np.ascontiguousarray(C[self._perm])
         if not hasattr(self, "_active"):  # construction: nothing to carry over
             self._const[:] = new
@@ -455,7 +495,21 @@ class CrackSet:
         # released stored energy booked exactly (there is no work without motion).
         x = self._x_last if self._x_last is not None else self.topology.x0
         K.project_to_envelope(np.ascontiguousarray(x, dtype=np.float64), self._nodes, self._const, self._status,
-                              self._state, self._diss, self._offset, self._active)
+                              self._state, self._diss, self._offset, self._dil, self._active)
+
+    def _dilation_constants(self, tanphi: np.ndarray) -> np.ndarray:
+        """(n, 2) ``[tan(psi_F), u_lim]`` per element (topology order) under the friction
+        ``tanphi = tan(phi) / F`` of the current reduction factor.
+
+        Dilation is geometry (the asperity angle), so a strength reduction keeps it, with one
+        exception: it is capped at the reduced friction, ``tan(psi_F) = min(tan(psi), tan(phi)/F)``,
+        because a joint sliding with ``tan(psi) > tan(phi_F)`` would dissipate
+        ``sigma_n (tan(phi_F) - tan(psi)) < 0`` per unit slip once its cohesion is gone, i.e.
+        create energy. The cap acts only where ``F > tan(phi)/tan(psi)``; the dilatant opening
+        already accumulated is state and does not change (no stored energy is created or lost).
+        """
+        D = self.dilation[self.tag]
+        return np.column_stack([np.minimum(D[:, 0], tanphi), D[:, 1]])
 
     def hold_elastic(self, on: bool = True) -> None:
         """Keep every element elastic (no damage, no breakage, no shear yield) while ``on``.
@@ -576,13 +630,13 @@ class CrackSet:
             return
         if self._active.size < self.parallel_min:
             nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                       self._offset, self._active, self._broke_flag)
+                                       self._offset, self._dil, self._active, self._broke_flag)
         elif self.scheme == "colour":
             nb = K.crack_forces_coloured(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                         self._offset, self._active, self._colour_ptr, self._broke_flag)
+                                         self._offset, self._dil, self._active, self._colour_ptr, self._broke_flag)
         else:
             nb = K.crack_forces_store(x, self._nodes, self._const, self._status, self._state, self._diss,
-                                      self._offset, self._active, self._fe, self._broke_flag)
+                                      self._offset, self._dil, self._active, self._fe, self._broke_flag)
             K.gather_node_forces(f, self._node_list, self._node_map, self._fe)
         if nb:
             self._register_breaks(x, step)
@@ -701,7 +755,8 @@ class CrackSet:
         d = {
             "kind": type(self).__name__, "n_cracks": self.n_cracks, "scheme": self.scheme,
             "const": self._const.copy(), "status": self._status.copy(), "state": self._state.copy(),
-            "diss": self._diss.copy(), "offset": self._offset.copy(), "broken": self.broken.copy(),
+            "diss": self._diss.copy(), "offset": self._offset.copy(), "dilation": self._dil.copy(),
+            "broken": self.broken.copy(),
             "failure_mode": self.failure_mode.copy(), "broke_flag": self._broke_flag.copy(),
             "released": float(self.released), "newly_broken": self.newly_broken.copy(),
             "events": self.events.copy(), "time": float(self._time),
@@ -725,8 +780,19 @@ class CrackSet:
                              f"{type(self).__name__} with {self.n_cracks} elements")
         if d["scheme"] != self.scheme:
             raise ValueError(f"crack state saved with scheme {d['scheme']!r}, this crack set uses {self.scheme!r}")
-        for name in ("const", "status", "state", "diss", "offset", "broke_flag"):
+        for name in ("const", "status", "diss", "offset", "broke_flag"):
             getattr(self, "_" + name)[:] = d[name]
+        state = np.asarray(d["state"])
+        if state.shape[1] == K.N_STATE_V1:  # saved before joint dilation: no sigma_prev, no d
+            self._state[:] = 0.0
+            self._state[:, :K.N_STATE_V1] = state
+            self._state[:, 8:10] = K.UNKNOWN_TRACTION
+        else:
+            self._state[:] = state
+        if "dilation" in d:
+            self._dil[:] = d["dilation"]
+        else:
+            self._dil[:] = self._dilation_constants(self.props[self.tag, 2] / float(d["reduction"]))[self._perm]
         self.broken[:] = d["broken"]
         self.failure_mode[:] = d["failure_mode"]
         self.strength_multiplier = np.array(d["strength_multiplier"], dtype=np.float64)

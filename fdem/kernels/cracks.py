@@ -31,11 +31,19 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``status : (n,) int8``
     0 while the element has never left the elastic range (its ``state`` row is then all
     zero and is not read), 1 after it first damaged or slid.
-``state : (n, 8) float64``
+``state : (n, 12) float64``
     ``[D, kappa, s_pl]`` of end 0 then of end 1: damage (never decreases, >= 1 is fully
     damaged), accumulated plastic slip [m], signed plastic slip [m]; then the shear traction
     applied at the last update of end 0 and of end 1 [N/m per end] (for the trapezoidal
-    booking of plastic work, see :func:`point_law`).
+    booking of plastic work, see :func:`point_law`); then the normal traction applied at the
+    last update of end 0 and of end 1 [N/m per end] (trapezoidal booking of the dilatant
+    work); then the dilatant opening ``d`` of end 0 and of end 1 [m] (joint dilation: the law
+    sees the effective opening ``o - d``).
+``dil : (n, 2) float64``
+    ``[tan(psi), u_lim]``: dilation coefficient [-] and the plastic slip [m] beyond which the
+    end stops dilating (``fdem.cohesive.CrackProperties.dilation_angle`` / ``dilation_limit``).
+    Read only in the inelastic branch (an element on the elastic fast path has no plastic
+    slip, so it has no dilation), which is why it is not part of the 64-byte ``const`` row.
 ``diss : (n, 3) float64``
     Energy dissipated by each element [J per metre of thickness]: mode-I (normal damage),
     mode-II (cohesive part of the shear strength), friction inside the intact element.
@@ -65,7 +73,11 @@ MUNJIZA = 0
 LINEAR = 1
 
 N_CONST = 8
-N_STATE = 8
+N_STATE = 12
+N_STATE_V1 = 8
+"""State columns before joint dilation (``[D, kappa, s_pl] x 2, tau_prev x 2``): checkpoints
+written then are padded on load (``sigma_prev`` unknown, ``d = 0``)."""
+N_DIL = 2
 UNKNOWN_TRACTION = -1.0e308
 """Sentinel for "no previous shear traction stored" (a NaN test would not survive fastmath)."""
 PARALLEL_MIN = 4096
@@ -96,30 +108,43 @@ def softening(D, kind):
 
 
 @njit(cache=True, fastmath=True)
-def point_law(o, s, D, kap, sp, tp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
+def point_law(o, s, D, kap, sp, tp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
+              d=0.0, sigp=UNKNOWN_TRACTION, tanpsi=0.0, ulim=0.0):
     """Cohesive law at one integration point: tractions and the updated state.
 
     Inputs are the opening ``o`` (>0 opens) and slip ``s`` [m] at the point, the state
-    ``D, kap, sp``, the shear traction ``tp`` applied at the previous update
-    (:data:`UNKNOWN_TRACTION` if unknown)
+    ``D, kap, sp, d``, the shear and normal tractions ``tp``, ``sigp`` applied at the previous
+    update (:data:`UNKNOWN_TRACTION` if unknown)
     and the constants: penalties ``Kn, Kt`` (``Kc`` in compression), peak opening ``op = Ft/Kn``,
     cohesion ``C``, ``tanphi``, ``inv_dO = 1/(o_r - o_p)``, ``inv_dK = 1/kappa_r``, softening
-    ``kind``. Stiffnesses, strengths and energies are per unit area, or all multiplied by the
-    point weight ``w`` (the law is homogeneous in that scaling).
+    ``kind``, dilation ``tanpsi = tan(psi)`` and its slip limit ``ulim`` [m]. Stiffnesses,
+    strengths and energies are per unit area, or all multiplied by the point weight ``w`` (the
+    law is homogeneous in that scaling).
 
-    Law (derived in ``docs/cohesive.md``)::
+    Law (derived in ``docs/cohesive.md``), with the effective opening ``oe = o - d``::
 
-        xi_I = max(o - o_p, 0) / (o_r - o_p)       normalised post-peak opening
+        xi_I = max(oe - o_p, 0) / (o_r - o_p)      normalised post-peak opening
         xi_II = kap / kappa_r                       normalised cohesive plastic slip
         D'   = max(D, sqrt(xi_I^2 + xi_II^2))       elliptical mixed mode, never heals
-        normal:  sigma = Kc o                       (o <= 0, full penalty in compression)
-                 sigma = z(D') Ft o / (o_p + D' (o_r - o_p))   (o > 0: secant, damaged stiffness)
+        normal:  sigma = Kc oe                      (oe <= 0, full penalty in compression)
+                 sigma = z(D') Ft oe / (o_p + D' (o_r - o_p))   (oe > 0: secant, damaged stiffness)
         shear:   tau_tr = Kt (s - sp)
                  F = z(D') C + max(-sigma, 0) tanphi          Mohr-Coulomb, tension cut-off
                  excess = max(|tau_tr| - F, 0)                 return map (plastic slip)
                  tau = tau_tr - sign(tau_tr) excess;  kap += excess/Kt;  sp += sign excess/Kt
 
-    In pure mode I the envelope is ``sigma = Ft z(D)`` at ``o = o_p + D (o_r - o_p)``, area
+    **Dilation** (non-associated joint dilation, Goodman 1976 *Methods of Geological
+    Engineering* ch. 5; Itasca PFC smooth-joint model, Mas Ivars et al. 2011 IJRMMS 48):
+    while the end slides, its faces separate normally by ``d = tan(psi) min(kap, u_lim)``
+    (accumulated increment by increment, ``dd = tan(psi) [min(kap', u_lim) - min(kap, u_lim)]``,
+    so a later change of ``tan(psi)`` changes no stored energy). The slip increment ``dk`` is
+    implicit in the dilation: ``|tau_tr| - Kt dk = F(dk)`` with
+    ``F(dk) = z C + Kc tanphi max(tan(psi) min(dk, u_lim - kap) - max(oe, 0), 0) + F_0`` (the
+    compression the dilation adds, ``F_0`` the friction before it), solved exactly on the
+    (at most three) linear pieces; so the returned tractions satisfy ``|tau| = F(sigma)`` with
+    the returned ``sigma``. ``tan(psi) = 0`` takes the original arithmetic (bit for bit).
+
+    In pure mode I the envelope is ``sigma = Ft z(D)`` at ``oe = o_p + D (o_r - o_p)``, area
     ``Ft o_p/2 + Ft (o_r - o_p) Zbar = G_I``; in pure mode II the cohesive part softens as
     ``C z(kap/kappa_r)``, area ``C kappa_r Zbar = G_II``; the frictional part
     ``sigma_n tanphi`` is dissipated as friction and never softens (residual = contact).
@@ -132,24 +157,37 @@ def point_law(o, s, D, kap, sp, tp, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind,
     (``F dk`` in steady sliding; ``F dk`` too when ``tp`` is unknown), shared between the
     cohesive part ``z C`` and friction in proportion. In dynamic sliding the strength ``F``
     changes from step to step with the normal traction, and ``F dk`` alone leaves a
-    first-order error in the ledger.
+    first-order error in the ledger. With dilation the normal spring takes part of it: the
+    trapezoidal normal work minus the change of ``sigma oe/2`` is ``(sigma + sigp) dd / 2``
+    (``sigma < 0`` in compression: negative, energy stored in the normal spring or spent
+    against the confinement, not dissipated), added to the friction share; with ``sigp``
+    unknown the normal traction before the slip at the same opening stands in for it (then
+    ``(sigma_0 + sigma) dd / 2`` is exactly minus the change of normal stored energy at fixed
+    opening). Steady sliding at ``sigma_n = -sigma``: ``dW = dk (z C + sigma_n (tanphi -
+    tan(psi)))``, non-negative because ``psi <= phi`` (checked by ``CrackProperties`` and kept
+    under strength reduction, see ``CrackSet``).
 
-    Returns ``(sigma, tau, D', kap', sp', dW_I, dW_II, dW_fric)``: tractions (tension and
-    slip-resisting positive) and the energy dissipated in this update by normal damage, by the
-    cohesive part and by friction [J/m^2, or J when the constants carry ``w``].
+    Returns ``(sigma, tau, D', kap', sp', d', dW_I, dW_II, dW_fric)``: tractions (tension and
+    slip-resisting positive), the updated state and the energy dissipated in this update by
+    normal damage, by the cohesive part and by friction (dilatant work included) [J/m^2, or J
+    when the constants carry ``w``].
     """
     sig_e = Kn * max(o, 0.0) + Kc * min(o, 0.0)
     ttr = Kt * (s - sp)
-    # Fast path, taken by nearly every element: intact, below the tensile peak, elastic shear.
+    # Fast path, taken by nearly every element: intact, below the tensile peak, elastic shear
+    # (no plastic slip, hence no dilation: d = 0).
     if D == 0.0 and kap == 0.0 and o <= op:
         if abs(ttr) <= C + max(-sig_e, 0.0) * tanphi:
-            return sig_e, ttr, 0.0, 0.0, sp, 0.0, 0.0, 0.0
-    return _point_law_inelastic(o, D, kap, sp, tp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
+            return sig_e, ttr, 0.0, 0.0, sp, d, 0.0, 0.0, 0.0
+    return _point_law_inelastic(o - d, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
+                                tanpsi, ulim)
 
 
 @njit(cache=True, fastmath=True)
-def _point_law_inelastic(o, D, kap, sp, tp, sig_e, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc):
-    """Damaging / sliding branch of :func:`point_law` (same law, general case)."""
+def _point_law_inelastic(o, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
+                         tanpsi, ulim):
+    """Damaging / sliding branch of :func:`point_law` (same law, general case); ``o`` is the
+    effective opening ``o - d`` here."""
     Ft = Kn * op
     dO = 1.0 / inv_dO
     xi1 = max(o - op, 0.0) * inv_dO
@@ -186,26 +224,48 @@ def _point_law_inelastic(o, D, kap, sp, tp, sig_e, ttr, Kn, Kt, op, C, tanphi, i
     sgn = 1.0 if ttr >= 0.0 else -1.0
     tau = ttr - sgn * excess
     dk = excess / Kt
+    dd = 0.0
+    wdil = 0.0
+    if dk > 0.0 and tanpsi > 0.0 and ulim > kap:
+        # Implicit dilation: F(dk) = F + a clip(dk - qo, 0, r - qo), a = Kc tanphi tanpsi,
+        # qo = slip that closes an open end, r = slip left before u_lim.
+        r = ulim - kap
+        qo = opos / tanpsi
+        a = Kc * tanphi * tanpsi
+        if a > 0.0 and dk > qo and r > qo:
+            dk = (att - F + a * qo) / (Kt + a)
+            if dk > r:
+                dk = (att - F - a * (r - qo)) / Kt
+            F = att - Kt * dk
+            tau = sgn * F
+        dd = tanpsi * min(dk, r)
+        oe = o - dd
+        sig0 = sig
+        sig = sec * max(oe, 0.0) + Kc * min(oe, 0.0)
+        fric = F - z * C
+        # Trapezoidal normal work minus the change of normal stored energy: (sigma + sigp) dd/2.
+        wdil = 0.5 * (sig + (sig0 if sigp == UNKNOWN_TRACTION else sigp)) * dd
     dWII = 0.0
     dWf = 0.0
     if dk > 0.0:
         work = F * dk if tp == UNKNOWN_TRACTION else 0.5 * dk * (F + sgn * tp)
         if F > 0.0:
             dWII = work * (z * C / F)
-            dWf = work * (fric / F)
+            dWf = work * (fric / F) + wdil
         else:
-            dWII = work
-    return sig, tau, Dn, kap + dk, sp + sgn * dk, dWI, dWII, dWf
+            dWII = work + wdil
+    return sig, tau, Dn, kap + dk, sp + sgn * dk, d + dd, dWI, dWII, dWf
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def element_update(c, x, nodes, const, status, state, diss, offset):
+def element_update(c, x, nodes, const, status, state, diss, offset, dil):
     """One crack element: kinematics, the law at both ends, state update.
 
     Tangent ``t`` along the mid-line of the two faces, ``t = (m1 - m0)/|m1 - m0|`` with
     ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``; normal ``n = (t_y, -t_x)`` (A into B).
     Separation at end 0: ``d0 = x3 - x0``, end 1: ``d1 = x2 - x1``; ``o = d.n + o_off``,
-    ``s = d.t + s_off`` with the element's separation offsets ``offset[c]``.
+    ``s = d.t + s_off`` with the element's separation offsets ``offset[c]``. The dilation
+    constants ``dil[c]`` and the state row are read only when the element leaves the fast path.
 
     Returns ``(broke, F0x, F0y, F1x, F1y)``: ``F_i = sigma_i n + tau_i t`` [N/m] is the force on
     the A node of end ``i``; the B node gets ``-F_i``. ``broke`` is True when both ends reached
@@ -258,18 +318,26 @@ def element_update(c, x, nodes, const, status, state, diss, offset):
     if not elastic:
         tp0 = UNKNOWN_TRACTION
         tp1 = UNKNOWN_TRACTION
+        np0 = UNKNOWN_TRACTION
+        np1 = UNKNOWN_TRACTION
         if status[c] != 0:
             tp0 = state[c, 6]
             tp1 = state[c, 7]
+            np0 = state[c, 8]
+            np1 = state[c, 9]
         status[c] = 1
         signed_inv_dO = const[c, 5]
         inv_dO = abs(signed_inv_dO)
         inv_dK = const[c, 6]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
-        sig0, tau0, Dn0, kn0, sn0, wI0, wII0, wf0 = point_law(
-            o0, s0, state[c, 0], state[c, 1], state[c, 2], tp0, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
-        sig1, tau1, Dn1, kn1, sn1, wI1, wII1, wf1 = point_law(
-            o1, s1, state[c, 3], state[c, 4], state[c, 5], tp1, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc)
+        tanpsi = dil[c, 0]
+        ulim = dil[c, 1]
+        sig0, tau0, Dn0, kn0, sn0, dn0, wI0, wII0, wf0 = point_law(
+            o0, s0, state[c, 0], state[c, 1], state[c, 2], tp0, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
+            state[c, 10], np0, tanpsi, ulim)
+        sig1, tau1, Dn1, kn1, sn1, dn1, wI1, wII1, wf1 = point_law(
+            o1, s1, state[c, 3], state[c, 4], state[c, 5], tp1, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
+            state[c, 11], np1, tanpsi, ulim)
         state[c, 0] = Dn0
         state[c, 1] = kn0
         state[c, 2] = sn0
@@ -278,6 +346,10 @@ def element_update(c, x, nodes, const, status, state, diss, offset):
         state[c, 5] = sn1
         state[c, 6] = tau0
         state[c, 7] = tau1
+        state[c, 8] = sig0
+        state[c, 9] = sig1
+        state[c, 10] = dn0
+        state[c, 11] = dn1
         diss[c, 0] += wI0 + wI1
         diss[c, 1] += wII0 + wII1
         diss[c, 2] += wf0 + wf1
@@ -291,10 +363,10 @@ def element_update(c, x, nodes, const, status, state, diss, offset):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, broke_flag):
+def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, dil, broke_flag):
     """Update element ``c`` and add its forces to its four nodes (``+F_i`` on the A node of end
     ``i``, ``-F_i`` on the B node). Returns 1 if it broke (and sets ``broke_flag[c]``), else 0."""
-    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset)
+    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
     i0 = nodes[c, 0]
     i1 = nodes[c, 1]
     i2 = nodes[c, 2]
@@ -314,7 +386,7 @@ def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, broke
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, active, colour_ptr, broke_flag):
+def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, dil, active, colour_ptr, broke_flag):
     """Add crack forces into ``f`` (n_nodes, 2) [N/m], colour by colour.
 
     ``active`` holds the live element ids grouped by colour, colour ``k`` in
@@ -325,22 +397,22 @@ def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, activ
     nb = 0
     for k in range(colour_ptr.shape[0] - 1):
         for j in prange(colour_ptr[k], colour_ptr[k + 1]):
-            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, broke_flag)
+            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, dil, broke_flag)
     return nb
 
 
 @njit(cache=True, fastmath=True)
-def crack_forces_serial(x, f, nodes, const, status, state, diss, offset, active, broke_flag):
+def crack_forces_serial(x, f, nodes, const, status, state, diss, offset, dil, active, broke_flag):
     """Serial version of :func:`crack_forces_coloured` for small active sets (no threading
     overhead; any element order is race-free on one thread)."""
     nb = 0
     for j in range(active.shape[0]):
-        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, broke_flag)
+        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, dil, broke_flag)
     return nb
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_store(x, nodes, const, status, state, diss, offset, active, fe, broke_flag):
+def crack_forces_store(x, nodes, const, status, state, diss, offset, dil, active, fe, broke_flag):
     """Per-element pass of the store-and-gather scheme: ``fe[c] = [F0x, F0y, F1x, F1y]``.
 
     Returns the number of elements that broke (their ``fe`` row is zero from then on).
@@ -348,7 +420,7 @@ def crack_forces_store(x, nodes, const, status, state, diss, offset, active, fe,
     nb = 0
     for j in prange(active.shape[0]):
         c = active[j]
-        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset)
+        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
         fe[c, 0] = F0x
         fe[c, 1] = F0y
         fe[c, 2] = F1x
@@ -409,7 +481,8 @@ def colour_elements(crack_triangles, n_tri):
 @njit(cache=True, fastmath=True)
 def crack_elastic_energy(x, nodes, const, state, offset, active):
     """Elastic energy stored in the live elements [J/m]: per end
-    ``sec o+^2/2 + Kc o-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)``."""
+    ``sec oe+^2/2 + Kc oe-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)`` and the effective
+    opening ``oe = o - d`` (``d`` the dilatant opening of the end, 0 without dilation)."""
     e = 0.0
     for j in range(active.shape[0]):
         c = active[j]
@@ -435,7 +508,7 @@ def crack_elastic_energy(x, nodes, const, state, offset, active):
             else:
                 dx = x[i2, 0] - x[i1, 0]
                 dy = x[i2, 1] - x[i1, 1]
-            o = dx * ty - dy * tx + offset[c, 2 * end]
+            o = dx * ty - dy * tx + offset[c, 2 * end] - state[c, 10 + end]
             s = dx * tx + dy * ty + offset[c, 2 * end + 1]
             D = state[c, 3 * end]
             sec = Kn
@@ -496,8 +569,9 @@ def remap_damage(old_const, new_const, state, status, active):
     by bisection), so the change neither stores nor releases energy. If the current separation
     lies beyond the new envelope, the next update of the law softens the end and books the
     released energy as fracture dissipation. Plastic slip is kept; the shear spring energy
-    ``K_t (s - s_pl)^2 / 2`` does not depend on the strength. Fully damaged ends (``D >= 1``)
-    stay fully damaged.
+    ``K_t (s - s_pl)^2 / 2`` does not depend on the strength, nor does the dilatant opening
+    ``d`` (a state variable), so the effective opening ``o - d`` and with it the stored energy
+    ``sec (o - d)+^2 / 2`` are unchanged. Fully damaged ends (``D >= 1``) stay fully damaged.
     """
     for j in range(active.shape[0]):
         c = active[j]
@@ -520,25 +594,28 @@ def remap_damage(old_const, new_const, state, status, active):
 
 
 @njit(cache=True, fastmath=True)
-def _end_energy(o, s, D, sp, const_row):
-    """Elastic energy stored at one end [J/m]: ``sec(D) o+^2/2 + K_c o-^2/2 + K_t (s - s_pl)^2/2``."""
-    opos = max(o, 0.0)
-    oneg = min(o, 0.0)
+def _end_energy(o, s, D, sp, d, const_row):
+    """Elastic energy stored at one end [J/m]: ``sec(D) oe+^2/2 + K_c oe-^2/2 + K_t (s - s_pl)^2/2``
+    with the effective opening ``oe = o - d``."""
+    opos = max(o - d, 0.0)
+    oneg = min(o - d, 0.0)
     ds = s - sp
     return 0.5 * (secant_stiffness(D, const_row) * opos * opos + const_row[7] * oneg * oneg
                   + const_row[1] * ds * ds)
 
 
 @njit(cache=True, fastmath=True)
-def project_to_envelope(x, nodes, const, status, state, diss, offset, active):
+def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, active):
     """Bring every end whose separation lies outside the (new) strength envelope back onto
     it at the current positions ``x``, booking the energy this releases exactly.
 
     Called after a strength change: ends beyond the new tensile envelope soften, ends above
     the new shear strength slip plastically, by the law itself (:func:`point_law`) at fixed
     separation. With no motion there is no work, so the dissipation is the drop of stored
-    energy ``E_before - E_after`` (:func:`_end_energy`), shared between mode I, mode II and
-    friction in the proportions the law reports. Returns the energy released [J/m].
+    energy ``E_before - E_after`` (:func:`_end_energy`, with the effective opening
+    ``o - d`` before and after: a dilating slip moves energy from the shear to the normal
+    spring), shared between mode I, mode II and friction in the proportions the law reports.
+    Returns the energy released [J/m].
     """
     total = 0.0
     for j in range(active.shape[0]):
@@ -573,17 +650,24 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, active):
             D = state[c, 3 * end]
             kap = state[c, 3 * end + 1]
             sp = state[c, 3 * end + 2]
-            before = _end_energy(o, s, D, sp, const[c])
-            _, tau, Dn, kn, sn, wI, wII, wf = point_law(
-                o, s, D, kap, sp, UNKNOWN_TRACTION, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc)
+            d = state[c, 10 + end]
+            before = _end_energy(o, s, D, sp, d, const[c])
+            sig, tau, Dn, kn, sn, dn, wI, wII, wf = point_law(
+                o, s, D, kap, sp, UNKNOWN_TRACTION, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc,
+                d, UNKNOWN_TRACTION, dil[c, 0], dil[c, 1])
             if Dn == D and kn == kap:
                 continue
+            if status[c] == 0:
+                # The other end keeps its zero state; its normal traction history is unknown.
+                state[c, 8 + 1 - end] = UNKNOWN_TRACTION
             status[c] = 1
             state[c, 3 * end] = Dn
             state[c, 3 * end + 1] = kn
             state[c, 3 * end + 2] = sn
             state[c, 6 + end] = tau
-            released = max(before - _end_energy(o, s, Dn, sn, const[c]), 0.0)
+            state[c, 8 + end] = sig
+            state[c, 10 + end] = dn
+            released = max(before - _end_energy(o, s, Dn, sn, dn, const[c]), 0.0)
             share = wI + wII + wf
             if share > 0.0:
                 diss[c, 0] += released * wI / share
