@@ -256,3 +256,15 @@ def history_columns(history, *names: str) -> tuple[np.ndarray, ...]:
     if missing:
         raise KeyError(f"history lacks column(s) {missing}")
     return tuple(np.asarray(cols[n], dtype=np.float64) for n in names)
+
+
+def slope_toe(polygon) -> tuple[float, float]:
+    """``(x, y)`` of the toe of a slope polygon whose toe is on the left (the project's
+    convention): the floor in front of the toe is the lowest part of the ground surface (the
+    vertices above the base), and the toe is its rightmost vertex."""
+    v = np.asarray(getattr(polygon, "vertices", polygon), dtype=np.float64)
+    above = v[v[:, 1] > v[:, 1].min()]
+    if above.size == 0:
+        raise ValueError("slope_toe: the polygon has no vertex above its base")
+    floor_y = above[:, 1].min()
+    return float(above[above[:, 1] == floor_y, 0].max()), float(floor_y)

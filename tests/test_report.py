@@ -1,0 +1,54 @@
+"""A slope run through failure and runout to rest writes every output with finite values."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fdem.analysis import slope_toe
+from fdem.report import RunReport
+from fdem.scenes import planar_slope_model
+from fdem.stages import response_time
+from fdem.workflow import SlopeWorkflow, run_slope_workflow
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
+import planar_failure as pf  # noqa: E402
+
+
+def _finite(obj) -> bool:
+    if isinstance(obj, dict):
+        return all(_finite(v) for v in obj.values())
+    if isinstance(obj, list):
+        return all(_finite(v) for v in obj)
+    if isinstance(obj, float):
+        return math.isfinite(obj)
+    return True  # None marks a figure that is undefined (no displaced material), never NaN
+
+
+def test_run_report_after_failure_and_runout(tmp_path):
+    g = planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES["tension_crack"])
+    s = pf.planar_failure_simulation(g, 1.6, out_dir=tmp_path, pictures=False)
+    sim = s.sim
+    toe_x, _ = slope_toe(g.bodies[0])
+    report = RunReport(sim, toe_x=toe_x)
+    T = response_time(sim.model)
+    summary = run_slope_workflow(sim, SlopeWorkflow(factors=(1.6, 3.0), step_time=8 * T, runout_time=0.4))
+    sim.close()
+    out = report.write(tmp_path, extra={"workflow": summary})
+    assert summary["outcome"] == "failed"
+    for name in ("summary.json", "events.csv", "kinetic_energy.png", "cracks_by_mode.png", "failure.png",
+                 "history.csv", "planar.pvd"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    data = json.loads((tmp_path / "summary.json").read_text())
+    assert _finite(data)
+    assert data["cracks"]["broken"] == int(s.cracks.broken.sum()) > 0
+    assert data["kinetic_energy"]["peak_J_per_m"] >= max(r["kinetic"] for r in sim.history) > 0
+    assert data["runout"]["max_displacement_m"] > 0.02
+    assert "NaN" not in (tmp_path / "summary.json").read_text()
+    # monitors: cumulative cracks by mode on every history row, never decreasing
+    broken = np.array([r["broken_I"] + r["broken_II"] + r["broken_mixed"] for r in sim.history])
+    assert np.all(np.diff(broken) >= 0) and broken[-1] == data["cracks"]["broken"]
+    assert np.all(np.array([r["fragments"] for r in sim.history]) >= 1)
