@@ -142,6 +142,36 @@ def damping_study(path: Path, sizes=STUDY_SIZES, fractions=STUDY_FRACTIONS, case
     return rows
 
 
+def plot_study(path: Path, png: Path) -> None:
+    """Slide error against mesh size, one line per damping fraction, one panel per case (matplotlib PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = json.loads(path.read_text())["runs"]
+    cases = sorted({(r["theta_deg"], r["phi_deg"]) for r in rows})
+    fig, axes = plt.subplots(1, len(cases), figsize=(5.2 * len(cases), 4.2), squeeze=False)
+    for ax, (theta, phi) in zip(axes[0], cases):
+        mine = [r for r in rows if (r["theta_deg"], r["phi_deg"]) == (theta, phi)]
+        for fraction in sorted({r["element_damping"] for r in mine}):
+            pts = sorted((r["size_m"], 100 * r["slide_error"]) for r in mine if r["element_damping"] == fraction)
+            label = "undamped" if fraction == 0 else f"{fraction:g} of critical"
+            style = dict(lw=2.5, color="k") if fraction == DEFAULT_ELEMENT_DAMPING else dict(lw=1.2)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=label, **style)
+        ax.axhspan(-1, 1, color="0.9", zorder=0)
+        ax.axhline(0, color="0.5", lw=0.8)
+        ax.set_xscale("log", base=2)
+        ax.invert_xaxis()
+        ax.set_xlabel("element size [m] (block 1 m x 1 m)")
+        ax.set_ylabel("slide at 1 s / rigid block - 1 [%]")
+        ax.set_title(f"theta {theta:g} deg, phi {phi:g} deg")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--theta", type=float, default=30.0)
@@ -160,6 +190,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.damping_study is not None:
         damping_study(args.damping_study)
+        plot_study(args.damping_study, args.damping_study.with_suffix(".png"))
         return
     r = run(args.theta, args.phi, args.t_end, args.width, args.height, out_dir=args.out, size=args.size,
             element_damping=args.element_damping)
