@@ -232,7 +232,8 @@ class Simulation:
     progress : bool
         Show a tqdm progress bar in :meth:`run`.
     pictures : bool
-        Render a PNG (von Mises stress on the deformed mesh) with every output frame.
+        Render a PNG with every output frame: displacement magnitude on the deformed mesh and
+        the broken crack elements by failure mode (:func:`fdem.pictures.failure_frame`).
     providers : sequence of force providers (see the module docstring).
     """
 
@@ -654,10 +655,27 @@ class Simulation:
             lines = np.arange(2 * topo.n_cracks, dtype=np.int64).reshape(-1, 2)
             self._crack_series.write(self.state.time, g["points"], lines, out.VTK_LINE, None, cell)
         if self.pictures:
-            out.render_png(self.out_dir / f"{self.name}_{self._frames:05d}.png", self.state.x, self.triangles,
-                           f["cell"]["stress_von_mises"], label="von Mises stress [Pa]",
-                           title=f"{self._stage} t = {self.state.time:.4g} s")
+            self._picture()
         self._frames += 1
+
+    def _picture(self) -> None:
+        """PNG of the frame: displacement magnitude on the deformed mesh with the broken crack
+        elements coloured by failure mode (how a rock engineer reads a failure)."""
+        from .pictures import failure_frame
+
+        topo = self.model.topology
+        disp = np.linalg.norm(self.state.x - self.x0, axis=1)
+        segments = broken = mode = None
+        if topo.n_cracks:
+            fields: dict = {}
+            for p in self.providers:
+                fields.update(provider_crack_fields(p, topo.n_cracks))
+            if "broken" in fields:
+                segments = self.crack_geometry()["points"]
+                broken = np.asarray(fields["broken"], bool)
+                mode = fields.get("failure_mode")
+        failure_frame(self.out_dir / f"{self.name}_{self._frames:05d}.png", self.state.x, self.triangles, disp,
+                      segments, broken, mode, title=f"{self._stage} t = {self.state.time:.4g} s")
 
     def close(self) -> None:
         if self._history_writer is not None:
