@@ -59,8 +59,10 @@ def pulse(theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITU
 
 
 def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float = PHI, size: float = 0.5,
-          element_damping: float = DEFAULT_ELEMENT_DAMPING, base_length: float = 8.0):
-    """Model, providers, block node ids and base node ids; the base shaken by ``history`` along x."""
+          element_damping: float = DEFAULT_ELEMENT_DAMPING, base_length: float = 8.0,
+          penalty: float = CONTACT_PENALTY):
+    """Model, providers, block node ids and base node ids; the base shaken by ``history`` along x.
+    ``penalty`` [Pa]: contact penalty."""
     base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
     block = rectangle(0.5 * base_length - 0.5, 0.5, 1.0, 1.0, name="block")
     topo = build_topology(mesh_model(Geometry([base, block]), size))
@@ -73,13 +75,13 @@ def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float
     block_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 1, 3))
     shake_base(model, base_nodes, history, components="xy")  # x: the history; y: held (a_y = 0)
     cracks = CrackSet(topo, {0: unbreakable(YOUNG)})
-    contact = ContactSet(topo, CONTACT_PENALTY, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
+    contact = ContactSet(topo, penalty, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
     return model, [cracks, contact], block_nodes, base_nodes
 
 
 def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO,
         period: float = PERIOD, t_after: float = 0.5, element_damping: float = DEFAULT_ELEMENT_DAMPING,
-        n_samples: int = 200) -> dict:
+        n_samples: int = 200, penalty: float = CONTACT_PENALTY) -> dict:
     """Shake the block; return its slip relative to the base against Newmark's, in time and at the end.
 
     The run lasts until ``t_after`` [s] past the Newmark block's stopping time. ``n_samples``
@@ -88,7 +90,7 @@ def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio
     history = pulse(theta_deg, phi_deg, ratio, period)
     t_nm, d_nm, _ = newmark_response(history.t, history.along((1, 0)), theta_deg, phi_deg, G)
     t_end = float(t_nm[-1]) + t_after
-    model, providers, block, base = build(history, theta_deg, phi_deg, size, element_damping)
+    model, providers, block, base = build(history, theta_deg, phi_deg, size, element_damping, penalty=penalty)
     sim = Simulation(model, providers=providers, progress=False)
     wall = time.perf_counter()
     sim.run(t_end=T_SETTLE, history_every=10**9, energy_tolerance=0.05, stage="settle")
@@ -116,7 +118,7 @@ def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio
             "balance_error_relative": float(row["balance_error_relative"]),
             "boundary_work_J_per_m": float(row["boundary_work"]), "friction_J_per_m": float(row.get("friction", 0.0)),
             "n_block_triangles": int(len(block) // 3), "dt_s": sim.dt, "steps": sim.state.step, "wall_s": wall,
-            "element_damping": element_damping,
+            "element_damping": element_damping, "contact_penalty_Pa": penalty,
             "t_s": times.tolist(), "slip_curve_m": slips.tolist(), "newmark_curve_m": d_curve.tolist()}
 
 

@@ -55,6 +55,8 @@ def test_velocity_is_the_exact_integral_of_the_piecewise_linear_record():
     assert r.velocity(10.0)[0] == pytest.approx(3.0)          # held after the record
     assert r.velocity_component(0)(2.0) == pytest.approx(1 + 2 * 1 - 1 / 2)
     assert r.displacement(4.0)[0] == pytest.approx(1 / 3 + (1 * 2 + 2 * 2 - 8 / 6) + 3.0)
+    box = AccelerationHistory.rectangular_pulse(2.0, 0.5, direction=(0.6, 0.8), start=1.0)
+    assert np.allclose(box.velocity(5.0), [0.6, 0.8]) and np.allclose(box.acceleration(0.9), 0.0)
 
 
 def test_linear_baseline_brings_the_base_to_rest():
