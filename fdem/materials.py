@@ -294,8 +294,10 @@ class ElasticMaterial:
     density : float
         Mass density ``rho`` [kg/m^3].
     viscosity : float
-        ``eta`` [Pa s] of the viscous stress ``S_v = eta dE/dt`` (Munjiza 2004, sec. 4.2 uses
-        ``eta = 2 h sqrt(E rho)`` to damp element-scale ringing); 0 for a conservative solid.
+        ``eta`` [Pa s] of the viscous stress ``S_v = eta dE/dt``; 0 for a conservative solid.
+        Element-scale damping depends on the element size, so set it per triangle with
+        :meth:`fdem.model.Model.set_element_damping` (a fraction of :func:`critical_viscosity`,
+        about ``1.19 h sqrt(E rho)`` at ``nu = 0.25``; Munjiza 2004, sec. 4.2, uses ``2 h sqrt(E rho)``).
     plane : str
         ``"strain"`` (default) or ``"stress"``.
     """
