@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cohesive import CrackProperties, CrackSet
-from fdem.geometry import Model as Geometry, disc
+from fdem.geometry import Geometry, disc
 from fdem.materials import ElasticMaterial
 from fdem.meshing import mesh_model
 from fdem.model import Model

@@ -8,7 +8,7 @@ Conventions
   in degrees, ``0 <= dip < 180``. With the toe on the left, a joint with ``0 < dip < face angle``
   daylights in the face (an "inclined" or low-angle set); ``dip > 90`` dips into the slope
   (an "anti-inclined" set).
-* Joint sets are numbered from 1 in the order they are given to :class:`Model`; 0 is reserved
+* Joint sets are numbered from 1 in the order they are given to :class:`Geometry`; 0 is reserved
   for intact rock bridges.
 
 No solver imports here: this module only describes geometry.
@@ -680,7 +680,7 @@ def _candidate_pairs(segments: np.ndarray, tol: float) -> tuple[np.ndarray, np.n
 
 @dataclass(frozen=True)
 class DFN:
-    """The processed fracture network of a :class:`Model`.
+    """The processed fracture network of a :class:`Geometry`.
 
     Attributes
     ----------
@@ -704,8 +704,9 @@ class DFN:
 
 
 @dataclass(frozen=True)
-class Model:
-    """Bodies and joint sets of a plane-strain section.
+class Geometry:
+    """Bodies and joint sets of a plane-strain section (what Gmsh meshes; the mechanical model
+    built on its mesh is :class:`fdem.model.Model`).
 
     ``bodies`` are polygons that may touch but not overlap; separate bodies share no nodes in the
     mesh and interact only by contact (e.g. a block resting on an incline). ``joint_sets`` are
@@ -721,7 +722,7 @@ class Model:
     def __post_init__(self):
         bodies = (self.bodies,) if isinstance(self.bodies, Polygon) else tuple(self.bodies)
         if not bodies:
-            raise ValueError("a model needs at least one body")
+            raise ValueError("a geometry needs at least one body")
         object.__setattr__(self, "bodies", bodies)
         object.__setattr__(self, "joint_sets", tuple(self.joint_sets))
         if self.min_joint_length < 0:
@@ -928,3 +929,12 @@ def _check_no_overlap(a: Polygon, b: Polygon, tol: float) -> None:
             if eps < t < 1 - eps and eps < u < 1 - eps:
                 x = ea[0] + t * d1
                 raise ValueError(f"bodies {a.name!r} and {b.name!r} overlap: their edges cross at {tuple(x)}")
+
+
+def __getattr__(name: str):
+    """``fdem.geometry.Model``: the former name of :class:`Geometry`, kept as a deprecated alias."""
+    if name == "Model":
+        warnings.warn("fdem.geometry.Model is deprecated: use fdem.geometry.Geometry (fdem.model.Model is the "
+                      "mechanical model)", DeprecationWarning, stacklevel=2)
+        return Geometry
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

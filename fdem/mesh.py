@@ -1,6 +1,6 @@
 """Conforming triangle meshes: the Mesh dataclass, meshio read/write, quality report.
 
-Gmsh meshing of a :class:`fdem.geometry.Model` lives in :mod:`fdem.meshing`; this module needs
+Gmsh meshing of a :class:`fdem.geometry.Geometry` lives in :mod:`fdem.meshing`; this module needs
 neither Gmsh nor the geometry, so the solver and the tests can build meshes without them.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Gmsh triangulation of a :class:`fdem.geometry.Model` conforming to its DFN, and mesh quality.
+"""Gmsh triangulation of a :class:`fdem.geometry.Geometry` conforming to its DFN, and mesh quality.
 
 The geometry module has already clipped the joints, merged their overlaps and split them at
 every crossing, so the model reaches Gmsh as a planar straight-line graph: boundary pieces form
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import Model, Polygon, cluster_points
+from .geometry import Geometry, Polygon, cluster_points
 from .mesh import JOINT_GROUP_PREFIX, Mesh
 from .topology import check_triangles
 
@@ -63,7 +63,7 @@ def _classify_boundary(pieces: np.ndarray, bounds, tol: float) -> list[str]:
     return names
 
 
-def mesh_model(model: Model, size: float, refine_near_joints: float | None = None,
+def mesh_model(model: Geometry, size: float, refine_near_joints: float | None = None,
                refine_distance: float | None = None, algorithm: str = "delaunay",
                min_angle_warning: float = 10.0, verbose: bool = False) -> Mesh:
     """Triangulate ``model`` with Gmsh at target element ``size`` [m], conforming to every joint.

@@ -1,4 +1,4 @@
-"""Geometries of the reference scenes of ``shared/cases.md``, as :class:`fdem.geometry.Model` objects.
+"""Geometries of the reference scenes of ``shared/cases.md``, as :class:`fdem.geometry.Geometry` objects.
 
 Where a paper is silent the choice is a keyword argument with the assumed default, named in
 the docstring, so a case script can expose it.
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .geometry import BrickSet, IntermittentSet, Model, SegmentSet, rectangle, simple_slope
+from .geometry import BrickSet, Geometry, IntermittentSet, SegmentSet, rectangle, simple_slope
 
 FOUR_SLOPE_HEIGHT = 15.0
 FOUR_SLOPE_FACE_ANGLE = 45.0
@@ -17,7 +17,7 @@ FOUR_SLOPE_SPACING = {"fine": 1.0, "coarse": 5.0}
 
 def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_length: float | None = None,
                      crest_length: float | None = None, base_depth: float | None = None,
-                     min_joint_length: float = 0.05) -> Model:
+                     min_joint_length: float = 0.05) -> Geometry:
     """The jointed slopes of cases.md A (seed 002): H = 15 m, face 45 deg, brick fabric.
 
     ``angle`` is ``"low"`` (persistent joints at 15 deg, inclined) or ``"high"`` (115 deg,
@@ -41,10 +41,10 @@ def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_leng
     n = (-math.sin(math.radians(dip)), math.cos(math.radians(dip)))
     offset = toe[0] * n[0] + toe[1] * n[1]
     fabric = BrickSet(dip=dip, spacing=s, offset=offset, name=f"{angle}-angle brick fabric")
-    return Model([slope], [fabric], min_joint_length=min_joint_length)
+    return Geometry([slope], [fabric], min_joint_length=min_joint_length)
 
 
-def muliashi_model(min_joint_length: float = 0.05) -> Model:
+def muliashi_model(min_joint_length: float = 0.05) -> Geometry:
     """The Muliashi open-pit slope of cases.md B (seed 001): 30 m x 22.5 m, 15 m bench at 65 deg,
     five layers of intermittent bedding joints (3 m long, dip 25 deg, 3 m apart along a layer,
     2.14 m between layers) above the toe.
@@ -65,11 +65,11 @@ def muliashi_model(min_joint_length: float = 0.05) -> Model:
     period = 3.0 / t[0]
     joints = IntermittentSet(dip=dip, trace_length=3.0, bridge_length=period - 3.0, row_spacing=2.14,
                              stagger=0.0, offset=offset + 0.5 * 2.14, rows=(0, 4), name="bedding")
-    return Model([slope], [joints], min_joint_length=min_joint_length)
+    return Geometry([slope], [joints], min_joint_length=min_joint_length)
 
 
 def block_on_incline_model(block_width: float = 1.0, block_height: float = 1.0, base_length: float = 10.0,
-                           base_thickness: float = 1.0) -> Model:
+                           base_thickness: float = 1.0) -> Geometry:
     """A block resting on a plane, built horizontal (tilt gravity to incline it).
 
     Two bodies, ``incline`` (0) and ``block`` (1), meshed separately so they interact by contact.
@@ -77,12 +77,12 @@ def block_on_incline_model(block_width: float = 1.0, block_height: float = 1.0, 
     base = rectangle(0.0, 0.0, base_length, base_thickness, name="incline")
     x0 = 0.5 * (base_length - block_width)
     block = rectangle(x0, base_thickness, block_width, block_height, name="block")
-    return Model([base, block])
+    return Geometry([base, block])
 
 
 def planar_slope_model(height: float, face_angle: float, plane_angle: float, crest_length: float | None = None,
                        toe_length: float | None = None, base_depth: float | None = None,
-                       tension_crack_offset: float | None = None, toe_step: float | None = None) -> Model:
+                       tension_crack_offset: float | None = None, toe_step: float | None = None) -> Geometry:
     """A slope with one persistent joint daylighting in the face: the planar-failure verification
     problem (Hoek & Bray 1981, ch. 7; Wyllie & Mah 2004, ch. 6; :mod:`fdem.limit_equilibrium`).
 
@@ -142,4 +142,4 @@ def planar_slope_model(height: float, face_angle: float, plane_angle: float, cre
     sets = [SegmentSet([[dx, dy, end[0], end[1]]], name="sliding plane")]
     if tension_crack_offset is not None:
         sets.append(SegmentSet([[end[0], end[1], end[0], dy + H]], name="tension crack"))
-    return Model([slope], sets)
+    return Geometry([slope], sets)

@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fdem.geometry import Model as Geometry, PersistentSet, SegmentSet, rectangle
+from fdem.geometry import Geometry, PersistentSet, SegmentSet, rectangle
 from fdem.geometry import CoincidentJointsWarning
 from fdem.materials import ElasticMaterial
 from fdem.mesh import structured_rectangle

@@ -5,7 +5,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fdem.geometry import (BrickSet, IntermittentSet, Model, PersistentSet, Polygon, SegmentSet,
+from fdem.geometry import (BrickSet, Geometry, IntermittentSet, PersistentSet, Polygon, SegmentSet,
                            StochasticSet, benched_slope, merge_collinear, rectangle, simple_slope,
                            split_at_crossings)
 
@@ -57,12 +57,12 @@ def test_joint_outside_domain_is_refused():
     box = rectangle(0, 0, 10, 5)
     js = SegmentSet([[1, 1, 4, 2], [20, 20, 25, 21]], name="mapped")
     with pytest.raises(ValueError, match=r"segment 1 .* lies outside the domain"):
-        Model([box], [js]).dfn()
+        Geometry([box], [js]).dfn()
 
 
 def test_persistent_set_is_clipped_and_spaced():
     box = rectangle(0, 0, 10, 10)
-    dfn = Model([box], [PersistentSet(dip=30, spacing=1.5, offset=0.2)]).dfn()
+    dfn = Geometry([box], [PersistentSet(dip=30, spacing=1.5, offset=0.2)]).dfn()
     n = np.array([-math.sin(math.radians(30)), math.cos(math.radians(30))])
     c = np.sort(dfn.segments[:, 0] @ n)
     assert np.allclose(np.diff(c), 1.5, atol=1e-9)
@@ -76,7 +76,7 @@ def test_persistent_set_is_clipped_and_spaced():
 def test_brick_fabric_spacings_and_half_block_offset():
     s, dip = 1.0, 15.0
     box = rectangle(0, 0, 20, 12)
-    dfn = Model([box], [BrickSet(dip=dip, spacing=s)]).dfn()
+    dfn = Geometry([box], [BrickSet(dip=dip, spacing=s)]).dfn()
     t = np.array([math.cos(math.radians(dip)), math.sin(math.radians(dip))])
     n = np.array([-t[1], t[0]])
     seg = dfn.segments
@@ -116,7 +116,7 @@ def test_intermittent_set_traces_bridges_and_stagger():
     box = rectangle(-50, -50, 100, 100)
     js = IntermittentSet(dip=25, trace_length=3.0, bridge_length=3.0 / math.cos(math.radians(25)) - 3.0,
                          row_spacing=2.14, stagger=0.7)
-    dfn = Model([box], [js]).dfn()
+    dfn = Geometry([box], [js]).dfn()
     L = np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1)
     whole = np.isclose(L, 3.0, atol=1e-9)
     assert whole.mean() > 0.9
@@ -135,7 +135,7 @@ def test_intermittent_set_traces_bridges_and_stagger():
 
 def test_stochastic_set_same_seed_same_network():
     box = rectangle(0, 0, 30, 20)
-    make = lambda seed: Model([box], [StochasticSet(count=40, length=("lognormal", 3, 1), dip=("normal", 60, 10),
+    make = lambda seed: Geometry([box], [StochasticSet(count=40, length=("lognormal", 3, 1), dip=("normal", 60, 10),
                                                     seed=seed)]).dfn().segments
     a, b, c = make(7), make(7), make(8)
     assert np.array_equal(a, b)
@@ -160,7 +160,7 @@ def test_short_segments_dropped_with_count_and_sharp_crossings_warned():
     js = SegmentSet([[1, 1, 9, 1], [5, 1.02, 5, 0.5], [2, 0.8, 8, 1.3]])
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
-        dfn = Model([box], [js], min_joint_length=0.05).dfn()
+        dfn = Geometry([box], [js], min_joint_length=0.05).dfn()
     messages = " ".join(str(x.message) for x in w)
     assert "dropped 1 joint segment" in messages
     assert "sharper than 15 deg" in messages and "worst 4.76 deg" in messages
@@ -169,11 +169,11 @@ def test_short_segments_dropped_with_count_and_sharp_crossings_warned():
 
 def test_overlapping_bodies_are_refused():
     with pytest.raises(ValueError, match="overlap"):
-        Model([rectangle(0, 0, 2, 2, "a"), rectangle(1, 1, 2, 2, "b")])
+        Geometry([rectangle(0, 0, 2, 2, "a"), rectangle(1, 1, 2, 2, "b")])
 
 
 def test_touching_bodies_are_allowed():
-    m = Model([rectangle(0, 0, 4, 1, "base"), rectangle(1, 1, 1, 1, "block")])
+    m = Geometry([rectangle(0, 0, 4, 1, "base"), rectangle(1, 1, 1, 1, "block")])
     assert m.area == pytest.approx(5.0)
 
 
@@ -183,7 +183,7 @@ def test_vertices_near_the_boundary_are_snapped_onto_it():
     js = SegmentSet([[1, 0.004, 9, 0.004 + 8 * math.tan(math.radians(20))], [1.0, 0.0, 1.0, 3.0]])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        dfn = Model([box], [js], min_joint_length=0.05).dfn()
+        dfn = Geometry([box], [js], min_joint_length=0.05).dfn()
     ends = dfn.segments.reshape(-1, 2)
     off_boundary = (ends[:, 1] > 0) & (ends[:, 1] < 10) & (ends[:, 0] > 0) & (ends[:, 0] < 10)
     # Every vertex is either on the boundary or at least min_joint_length away from it.
@@ -223,3 +223,16 @@ def test_disc_area():
     assert d.area == pytest.approx(32 * 0.25 * math.sin(2 * math.pi / 64), rel=1e-14)
     with pytest.raises(ValueError, match="radius must be positive"):
         disc((0, 0), 0.0)
+
+
+def test_model_is_a_deprecated_alias_of_geometry():
+    import fdem.geometry as geometry
+
+    with pytest.warns(DeprecationWarning, match="use fdem.geometry.Geometry"):
+        alias = geometry.Model
+    assert alias is Geometry
+    with pytest.warns(DeprecationWarning):
+        from fdem.geometry import Model  # noqa: F401  (the old import line keeps working)
+    assert Model([rectangle(0, 0, 2, 1)]).area == pytest.approx(2.0)
+    with pytest.raises(AttributeError, match="no attribute 'Modle'"):
+        geometry.Modle  # noqa: B018

@@ -6,7 +6,7 @@ import pytest
 
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
-from fdem.geometry import Model as Geometry, rectangle
+from fdem.geometry import Geometry, rectangle
 from fdem.materials import ElasticMaterial
 from fdem.meshing import mesh_model
 from fdem.model import Model

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.geometry import BrickSet, IntermittentSet, Model, SegmentSet, rectangle, simple_slope
+from fdem.geometry import BrickSet, Geometry, IntermittentSet, SegmentSet, rectangle, simple_slope
 from fdem.mesh import Mesh, structured_rectangle
 from fdem.meshing import mesh_model, quality_report
 from fdem.topology import build_topology, check_triangles
@@ -17,7 +17,7 @@ MESHES = Path(__file__).resolve().parents[1] / "meshes"
 
 def small_slope_model():
     slope = simple_slope(height=6, face_angle=45, crest_length=6, toe_length=6, base_depth=3)
-    return Model([slope], [BrickSet(dip=15, spacing=1.5), IntermittentSet(dip=115, trace_length=2,
+    return Geometry([slope], [BrickSet(dip=15, spacing=1.5), IntermittentSet(dip=115, trace_length=2,
                                                                            bridge_length=1, row_spacing=2.5,
                                                                            stagger=1.0)],
                  min_joint_length=0.05)
@@ -165,7 +165,7 @@ def test_quality_report(slope_mesh):
 
 
 def test_refinement_near_joints_makes_smaller_edges_there():
-    model = Model([rectangle(0, 0, 10, 5)], [SegmentSet([[2, 2.5, 8, 2.5]])])
+    model = Geometry([rectangle(0, 0, 10, 5)], [SegmentSet([[2, 2.5, 8, 2.5]])])
     coarse = build_topology(mesh_model(model, 0.5))
     fine = build_topology(mesh_model(model, 0.5, refine_near_joints=0.25, refine_distance=1.0))
     on_joint = lambda t: t.crack_length0[t.crack_tag == 1]
@@ -176,7 +176,7 @@ def test_refinement_near_joints_makes_smaller_edges_there():
 def test_two_bodies_share_no_nodes_and_no_crack_elements():
     base = rectangle(0, 0, 6, 1, "incline")
     block = rectangle(2, 1, 1, 1, "block")
-    mesh = mesh_model(Model([base, block]), 0.25)
+    mesh = mesh_model(Geometry([base, block]), 0.25)
     topo = build_topology(mesh)
     assert set(np.unique(mesh.triangle_body)) == {0, 1}
     used = [set(mesh.triangles[mesh.triangle_body == b].ravel()) for b in (0, 1)]
@@ -191,7 +191,7 @@ def test_two_bodies_share_no_nodes_and_no_crack_elements():
 @pytest.mark.parametrize("size", [0.0, -0.1, float("nan")])
 def test_non_positive_mesh_size(size):
     with pytest.raises(ValueError, match="mesh size must be positive"):
-        mesh_model(Model([rectangle(0, 0, 1, 1)]), size)
+        mesh_model(Geometry([rectangle(0, 0, 1, 1)]), size)
 
 
 def test_degenerate_and_inverted_triangles_are_named():
@@ -205,7 +205,7 @@ def test_degenerate_and_inverted_triangles_are_named():
 
 
 def test_small_angle_warning_names_count_and_worst_angle():
-    model = Model([rectangle(0, 0, 10, 10)], [SegmentSet([[1, 5, 9, 5], [1, 4.5, 9, 5.3]])])
+    model = Geometry([rectangle(0, 0, 10, 10)], [SegmentSet([[1, 5, 9, 5], [1, 4.5, 9, 5.3]])])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mesh_model(model, 1.0)
