@@ -446,8 +446,48 @@ def default_trial_stage(sim: Simulation) -> Stage:
                  fail=Failure(), damping=fundamental_damping(sim))
 
 
+def _trial_stage_at(trial: Stage, factor: float) -> Stage:
+    return Stage(f"{trial.name}_F{factor:.4f}", duration=trial.duration, max_time=trial.max_time,
+                 converge=trial.converge, fail=trial.fail, damping=trial.damping, hold_elastic=trial.hold_elastic,
+                 check_interval=trial.check_interval, monitor=trial.monitor)
+
+
+def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[Trial, dict | None]:
+    """One trial on ``sim`` (already restored to the starting state): the verdict, and for a
+    failing trial what it broke (failure surface, broken elements, positions, modes)."""
+    trigger.apply(sim, factor)
+    result = run_stage(sim, _trial_stage_at(trial, factor), frames=False)
+    stable = result.reason == "converged"
+    info = None
+    cracks = crack_set_of(sim)
+    if not stable and cracks is not None:
+        info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
+                    positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
+    return Trial(factor, stable, result), info
+
+
+_WORKER: dict = {}
+
+
+def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float):
+    """A trial in a worker process: build the scene once, load the equilibrium checkpoint, then
+    restart every trial from it."""
+    from .checkpoint import load_checkpoint, restore, snapshot
+
+    key = (build, build_args, checkpoint)
+    if _WORKER.get("key") != key:
+        sim = build(*build_args)
+        sim.progress = False
+        load_checkpoint(sim, checkpoint)
+        _WORKER.update(key=key, sim=sim, start=snapshot(sim))
+    sim = _WORKER["sim"]
+    restore(sim, _WORKER["start"])
+    return _run_trial(sim, trigger, trial, factor)
+
+
 def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
-                     trial: Stage | None = None, trigger=None, out_dir=None) -> FoSResult:
+                     trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
+                     build=None, build_args: tuple = ()) -> FoSResult:
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
@@ -459,14 +499,27 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     written to ``out_dir/fos.json`` and the first failing trial to ``out_dir/fos_failure.png``
     (displacement since the equilibrium state, broken crack elements coloured by mode and the
     softened or sliding ones in black: the failure surface).
+
+    Trials in parallel: with ``workers = w > 1`` each round runs ``w`` trials at once in
+    worker processes (one Numba thread each), at the ``w`` points that split the bracket into
+    ``w + 1`` equal parts, so a round narrows it ``w + 1``-fold instead of 2-fold. Each worker
+    builds the scene with ``build(*build_args)`` (a picklable, module-level function returning
+    a simulation of the same mesh and providers as ``sim``) and restarts its trials from a
+    checkpoint of ``sim`` (:func:`fdem.checkpoint.save_checkpoint`; in ``out_dir`` when given).
     """
-    from .checkpoint import restore, snapshot
+    from .checkpoint import restore, save_checkpoint, snapshot
 
     for name, value in (("lower", lower), ("upper", upper), ("tol", tol)):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"factor_of_safety: {name} must be positive and finite, got {value!r}")
     if not upper > lower:
         raise ValueError(f"factor_of_safety: upper ({upper}) must exceed lower ({lower})")
+    workers = int(workers)
+    if workers < 1:
+        raise ValueError(f"factor_of_safety: workers must be >= 1, got {workers}")
+    if workers > 1 and not callable(build):
+        raise ValueError("factor_of_safety: workers > 1 needs build, a module-level function returning a "
+                         "simulation identical to sim (the workers restart trials from a checkpoint of sim)")
     trigger = trigger or StrengthReduction()
     trial = trial or default_trial_stage(sim)
     if trial.converge is None:
@@ -477,39 +530,75 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     trials: list[Trial] = []
     first_fail: dict = {}
     wall = time.perf_counter()
+    pool = None
+    tmp = None
+    saved_env = None
 
-    def attempt(factor: float) -> bool:
-        restore(sim, start)
-        trigger.apply(sim, factor)
-        stage = Stage(f"{trial.name}_F{factor:.4f}", duration=trial.duration, max_time=trial.max_time,
-                      converge=trial.converge, fail=trial.fail, damping=trial.damping,
-                      hold_elastic=trial.hold_elastic, check_interval=trial.check_interval,
-                      monitor=trial.monitor)
-        result = run_stage(sim, stage, frames=False)
-        stable = result.reason == "converged"
-        trials.append(Trial(factor, stable, result))
-        if not stable and (not first_fail or factor < first_fail["factor"]) and cracks is not None:
-            first_fail.update(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
-                              positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
-        return stable
+    def record(outcome) -> bool:
+        t, info = outcome
+        trials.append(t)
+        if info is not None and (not first_fail or t.factor < first_fail["factor"]):
+            first_fail.clear()
+            first_fail.update(info)
+        return t.stable
+
+    if workers > 1:
+        import multiprocessing
+        import os
+        import tempfile
+        from concurrent.futures import ProcessPoolExecutor
+
+        if out_dir is not None:
+            Path(out_dir).mkdir(parents=True, exist_ok=True)
+            checkpoint = Path(out_dir) / "fos_start.npz"
+        else:
+            tmp = tempfile.TemporaryDirectory(prefix="fdem_fos_")
+            checkpoint = Path(tmp.name) / "fos_start.npz"
+        save_checkpoint(sim, checkpoint)
+        # workers inherit the environment: one Numba thread each, so trials do not fight for cores
+        saved_env = os.environ.get("NUMBA_NUM_THREADS")
+        os.environ["NUMBA_NUM_THREADS"] = "1"
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def run_many(factors: list[float]) -> list[bool]:
+        if pool is None:
+            out = []
+            for f in factors:
+                restore(sim, start)
+                out.append(record(_run_trial(sim, trigger, trial, f)))
+            return out
+        futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f)
+                   for f in factors]
+        return [record(fut.result()) for fut in futures]
 
     try:
-        if not attempt(lower):
-            r = trials[-1].result
+        ends = run_many([lower, upper])
+        if not ends[0]:
+            r = trials[0].result
             raise ValueError(f"factor_of_safety: the slope already fails at the lower factor F = {lower:g} "
                              f"({r.reason}: {r.detail}); lower the bracket")
-        if attempt(upper):
-            r = trials[-1].result
+        if ends[1]:
+            r = trials[1].result
             raise ValueError(f"factor_of_safety: the slope is still stable at the upper factor F = {upper:g} "
                              f"(converged {r.detail}); raise the bracket")
         lo, hi = lower, upper
         while hi - lo > tol:
-            mid = 0.5 * (lo + hi)
-            if attempt(mid):
-                lo = mid
-            else:
-                hi = mid
+            points = [lo + (hi - lo) * (k + 1) / (workers + 1) for k in range(workers)]
+            stable = run_many(points)
+            failing = [f for f, st in zip(points, stable) if not st]
+            hi = min(failing + [hi])
+            lo = max([f for f, st in zip(points, stable) if st and f < hi] + [lo])
     finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+            import os
+
+            if saved_env is None:
+                os.environ.pop("NUMBA_NUM_THREADS", None)
+            else:
+                os.environ["NUMBA_NUM_THREADS"] = saved_env
+        if tmp is not None:
+            tmp.cleanup()
         restore(sim, start)
         trigger.reset(sim, start_factor)
     result = FoSResult(fos=0.5 * (lo + hi), bracket=(lo, hi), tolerance=tol, trigger=trigger.name, trials=trials,

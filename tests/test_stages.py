@@ -108,3 +108,27 @@ def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor()
     assert row["gravity_change_work"] != 0.0 and row["kinetic"] > 0.0
     errors = np.array([abs(r["balance_error_relative"]) for r in sim.history])
     assert errors.max() < 0.01, f"ledger error {errors.max():.3g} of the energy scale"
+
+
+def planar_simulation(geometry: str, size: float):
+    """Module-level scene builder: worker processes of the parallel search call it."""
+    return scene(geometry).sim if size == SIZE else pf.planar_failure_simulation(
+        planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES[geometry]), size).sim
+
+
+def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibrium(tmp_path):
+    """Two worker processes, each restarting its trials from a checkpoint of the equilibrium
+    state: each round splits the bracket in three; the factor of safety lands within 10 % of
+    Hoek and Bray's, like the serial search."""
+    from fdem.stages import factor_of_safety
+
+    sim = scene().sim
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"])
+    result = factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.05, workers=2, build=planar_simulation,
+                              build_args=("no_crack", SIZE), out_dir=tmp_path)
+    assert result.bracket[1] - result.bracket[0] <= 0.05
+    assert result.fos == pytest.approx(le.fos, rel=0.10), (result.fos, le.fos)
+    assert len(result.trials) == 2 + 2 * 3          # the ends, then three rounds of two
+    assert (tmp_path / "fos_start.npz").exists() and (tmp_path / "fos.json").exists()
+    with pytest.raises(ValueError, match="needs build"):
+        factor_of_safety(sim, workers=2)
