@@ -206,6 +206,7 @@ def _point_law_inelastic(o, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi,
         sec = Kn
     sig = sec * opos + Kc * oneg
     dWI = 0.0
+    dsig = 0.0
     if Dn > D:
         sec_old = Kn
         if D > 0.0:
@@ -217,6 +218,7 @@ def _point_law_inelastic(o, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi,
         # envelope at fixed opening (a strength change) is booked by project_to_envelope.
         oref = min(op + D * dO, opos)
         dWI = 0.5 * (sec_old - sec) * oref * opos
+        dsig = (sec_old - sec) * opos  # traction drop of that damage step (for the dilatant work)
     att = abs(ttr)
     fric = max(-sig, 0.0) * tanphi
     F = z * C + fric
@@ -243,8 +245,9 @@ def _point_law_inelastic(o, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi,
         sig0 = sig
         sig = sec * max(oe, 0.0) + Kc * min(oe, 0.0)
         fric = F - z * C
-        # Trapezoidal normal work minus the change of normal stored energy: (sigma + sigp) dd/2.
-        wdil = 0.5 * (sig + (sig0 if sigp == UNKNOWN_TRACTION else sigp)) * dd
+        # Trapezoidal normal work minus the change of normal stored energy: (sigma + sigp) dd/2,
+        # sigp taken after this update's damage step (its energy is in dW_I already).
+        wdil = 0.5 * (sig + (sig0 if sigp == UNKNOWN_TRACTION else sigp - dsig)) * dd
     dWII = 0.0
     dWf = 0.0
     if dk > 0.0:
