@@ -1,0 +1,251 @@
+"""Stochastic ensembles on Dask (fdem.ensembles): sampling, refusal of bad input, a tiny ensemble
+of the planar-failure slope on a local cluster (reproducible, a failing realization recorded,
+resume), the probability-of-failure interval and the report."""
+from __future__ import annotations
+
+import csv
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
+
+from fdem.ensembles import (TABLE, Distribution, Ensemble, local_cluster, read_table, run_ensemble, summarize,
+                            wilson_interval)
+
+HEIGHT = 10.0
+GEOMETRY = dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=None)
+FOS = (1.0, 2.0, 0.25)          # lower (stable), upper (failing), tolerance: four trials per realization
+
+
+@dataclass(frozen=True)
+class CountingPlanarScene:
+    """The planar-failure slope (cases/planar_failure.py) at mesh size ``size``; every call leaves
+    a marker file in ``marker_dir`` (so a test counts the realizations that really ran) and a
+    call with ``cohesion > fail_above`` raises."""
+
+    size: float
+    marker_dir: str
+    fail_above: float = math.inf
+
+    def __call__(self, cohesion: float, friction_angle: float):
+        from planar_failure import planar_failure_simulation
+
+        from fdem.scenes import planar_slope_model
+
+        Path(self.marker_dir, f"{os.getpid()}_{time.time_ns()}").touch()
+        if cohesion > self.fail_above:
+            raise RuntimeError(f"injected failure at cohesion {cohesion:.1f} Pa")
+        return planar_failure_simulation(planar_slope_model(HEIGHT, **GEOMETRY), self.size, cohesion=cohesion,
+                                         friction_angle=friction_angle)
+
+
+def scene_function(cohesion: float):
+    """A module-level scene function (never run here)."""
+    raise NotImplementedError
+
+
+PARAMETERS = {"cohesion": Distribution.uniform(12e3, 28e3),
+              "friction_angle": Distribution.normal(30.0, 2.0, low=25.0, high=35.0)}
+
+
+def hoek_bray(cohesion: float, friction_angle: float) -> float:
+    """Hoek-Bray factor of safety of the dry planar slope (gamma = 25 kN/m^3)."""
+    from fdem.limit_equilibrium import planar_fos
+
+    return planar_fos(HEIGHT, GEOMETRY["face_angle"], GEOMETRY["plane_angle"], cohesion, friction_angle,
+                      25e3).fos
+
+
+def markers(path) -> int:
+    return len(os.listdir(path))
+
+
+# ----------------------------------------------------------------------------- input and sampling
+@pytest.mark.parametrize("dist, message", [
+    (Distribution.normal(30.0, -1.0), "standard deviation > 0"),
+    (Distribution.lognormal(20e3, 0.0), "standard deviation > 0"),
+    (Distribution.lognormal(-1.0, 1.0), "mean > 0"),
+    (Distribution.uniform(5.0, 5.0), "low < high"),
+    (Distribution.uniform(float("nan"), 1.0), "finite"),
+    (Distribution.fixed(float("nan")), "finite"),
+    (Distribution.normal(30.0, 3.0, low=40.0, high=20.0), "low < high"),
+    (Distribution("weibull", 1.0, 2.0), "unknown distribution"),
+])
+def test_invalid_distribution_is_refused_naming_the_parameter(dist, message):
+    with pytest.raises(ValueError, match=message) as err:
+        Ensemble(scene_function, {"cohesion": dist}, n=4)
+    assert "'cohesion'" in str(err.value)
+
+
+def test_invalid_ensemble_settings_are_refused():
+    with pytest.raises(ValueError, match="n must be a positive integer"):
+        Ensemble(scene_function, {}, n=0)
+    with pytest.raises(ValueError, match="'lhs' or 'mc'"):
+        Ensemble(scene_function, {}, n=2, method="sobol")
+    with pytest.raises(ValueError, match="module-level function or a dataclass"):
+        Ensemble(lambda cohesion: None, {}, n=2)
+    with pytest.raises(ValueError, match="lower < upper"):
+        Ensemble(scene_function, {}, n=2, fos=(2.0, 1.0, 0.1))
+
+
+def test_sampling_is_seeded_stratified_and_respects_bounds():
+    params = {"c": Distribution.uniform(0.0, 10.0), "phi": Distribution.normal(30.0, 10.0, low=25.0, high=35.0),
+              "L": Distribution.lognormal(3.0, 1.0), "k": Distribution.fixed(4), "s": Distribution.seed()}
+    e = Ensemble(scene_function, params, n=10, seed=7)
+    a, b = e.sample(), e.sample()
+    assert a == b                                                        # same seed, same parameters
+    assert Ensemble(scene_function, params, n=10, seed=8).sample() != a
+    c = np.array([r["c"] for r in a])
+    assert sorted(np.floor(c).astype(int)) == list(range(10))            # Latin hypercube: one per tenth
+    phi = np.array([r["phi"] for r in a])
+    assert phi.min() >= 25.0 and phi.max() <= 35.0                      # truncated
+    assert all(r["k"] == 4 for r in a)
+    assert all(isinstance(r["s"], int) and 0 <= r["s"] < 2 ** 31 for r in a) and len({r["s"] for r in a}) == 10
+    # Monte Carlo: realization i does not depend on n.
+    mc5 = Ensemble(scene_function, params, n=5, seed=7, method="mc").sample()
+    mc3 = Ensemble(scene_function, params, n=3, seed=7, method="mc").sample()
+    assert mc5[:3] == mc3
+    # Lognormal parameters are the variable's own mean and sd: check on a large sample.
+    big = Ensemble(scene_function, {"L": Distribution.lognormal(3.0, 1.0)}, n=4000, seed=1).sample()
+    L = np.array([r["L"] for r in big])
+    assert L.mean() == pytest.approx(3.0, rel=0.02) and L.std() == pytest.approx(1.0, rel=0.05)
+
+
+def test_wilson_interval_matches_the_closed_form_and_scipy():
+    from scipy.stats import binomtest
+
+    # 5 / 20 at 95 %: centre (0.25 + 1.96^2/40) / (1 + 1.96^2/20) = 0.29029, half-width 0.17843.
+    lo, hi = wilson_interval(5, 20)
+    assert lo == pytest.approx(0.11186, abs=2e-5) and hi == pytest.approx(0.46871, abs=2e-5)
+    ci = binomtest(5, 20).proportion_ci(0.95, method="wilson")
+    assert (lo, hi) == pytest.approx((ci.low, ci.high), rel=1e-9)
+    # No failure in 20: the upper bound is z^2 / (n + z^2) = 0.16113.
+    assert wilson_interval(0, 20) == pytest.approx((0.0, 3.8415 / 23.8415), abs=1e-4)
+
+
+# ----------------------------------------------------------------------------- on a local cluster
+@pytest.fixture(scope="module")
+def client():
+    from dask.distributed import Client
+
+    cluster = local_cluster(2)
+    c = Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def finished(client, tmp_path_factory):
+    """Four realizations, the one with the largest cohesion raising."""
+    base = tmp_path_factory.mktemp("ensemble")
+    marker_dir = base / "markers"
+    marker_dir.mkdir()
+    probe = Ensemble(CountingPlanarScene(3.0, str(marker_dir)), PARAMETERS, n=4, seed=3, fos=FOS)
+    samples = probe.sample()
+    worst = max(range(4), key=lambda i: samples[i]["cohesion"])
+    threshold = 0.5 * (samples[worst]["cohesion"] + max(s["cohesion"] for i, s in enumerate(samples) if i != worst))
+    ens = Ensemble(CountingPlanarScene(3.0, str(marker_dir), fail_above=threshold), PARAMETERS, n=4, seed=3,
+                   fos=FOS)
+    out = base / "run"
+    run = run_ensemble(ens, out, client=client, progress=False)
+    return dict(ens=ens, out=out, run=run, markers=marker_dir, samples=samples, worst=worst)
+
+
+def test_every_realization_gets_a_row_and_a_failing_one_does_not_stop_the_others(finished):
+    run, samples = finished["run"], finished["samples"]
+    assert run.n_run == 4 and run.n_skipped == 0
+    assert markers(finished["markers"]) == 4
+    digest, rows = read_table(finished["out"] / TABLE)
+    assert digest == finished["ens"].fingerprint()
+    assert [r["index"] for r in rows] == [0, 1, 2, 3]
+    bad = rows[finished["worst"]]
+    assert bad["status"] == "error" and "RuntimeError: injected failure" in bad["error"]
+    for r in rows:
+        assert r["p_cohesion"] == samples[r["index"]]["cohesion"]        # parameters in the table, exactly
+        if r is bad:
+            continue
+        assert r["status"] == "ok" and r["error"] == ""
+        assert r["numba_threads"] == 1                                   # one Numba thread per worker
+        assert r["peak_rss_mb"] > 50 and r["wall_s"] > 0
+        # Strength reduction brackets the Hoek-Bray value of the sampled c and phi (within 2 %).
+        F = hoek_bray(r["p_cohesion"], r["p_friction_angle"])
+        assert r["fos_lower"] <= 1.02 * F and 0.98 * F <= r["fos_upper"]
+        assert r["fos_upper"] - r["fos_lower"] <= FOS[2]
+    assert len({r["worker_pid"] for r in rows}) >= 1
+
+
+def test_resume_runs_only_missing_realizations_and_reproduces_them(finished, client):
+    out, marker_dir = finished["out"], finished["markers"]
+    _, before = read_table(out / TABLE)
+    again = run_ensemble(finished["ens"], out, client=client, progress=False)
+    assert again.n_run == 0 and again.n_skipped == 4
+    assert markers(marker_dir) == 4                                      # nothing ran
+    # Drop the last two rows of the table: a rerun runs exactly those two.
+    lines = (out / TABLE).read_text().splitlines(keepends=True)
+    (out / TABLE).write_text("".join(lines[:-2]))
+    dropped = [int(line.split(",")[0]) for line in lines[-2:]]
+    resumed = run_ensemble(finished["ens"], out, client=client, progress=False)
+    assert resumed.n_run == 2 and resumed.n_skipped == 2
+    assert markers(marker_dir) == 6
+    _, after = read_table(out / TABLE)
+    assert len(after) == 4
+    for i in dropped:                                                    # same parameters, same FoS, bit for bit
+        for key in ("status", "p_cohesion", "p_friction_angle", "fos", "fos_lower", "fos_upper", "n_trials"):
+            a, b = before[i][key], after[i][key]
+            assert a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b)), (i, key, a, b)
+
+
+def test_report_gives_probability_of_failure_sensitivity_and_pictures(finished):
+    s = summarize(finished["out"])
+    _, rows = read_table(finished["out"] / TABLE)
+    ok = [r for r in rows if r["status"] == "ok"]
+    k = sum(r["fos"] < 1 for r in ok)
+    pf = s["probability_of_failure"]
+    assert (pf["k"], pf["m"]) == (k, len(ok)) and s["status"]["error"] == 1
+    assert pf["wilson"] == pytest.approx(list(wilson_interval(k, len(ok))))
+    assert pf["clopper_pearson"][0] <= pf["pf"] <= pf["clopper_pearson"][1]
+    assert set(s["spearman"]) == {"cohesion", "friction_angle"}
+    assert s["fos"]["min"] == min(r["fos"] for r in ok)
+    assert s["least_stable"] == min(ok, key=lambda r: r["fos"])["index"]
+    for name in ("fos_distribution.png", "sensitivity.png", "least_stable.png", "most_stable.png"):
+        path = finished["out"] / name
+        assert path.stat().st_size > 10_000 and path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_results_of_another_description_are_refused_before_anything_runs(finished):
+    other = Ensemble(finished["ens"].scene, PARAMETERS, n=4, seed=4, fos=FOS)   # another seed
+    n = markers(finished["markers"])
+    size = (finished["out"] / TABLE).stat().st_size
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match="another ensemble description"):
+        run_ensemble(other, finished["out"], workers=1, progress=False)
+    assert time.perf_counter() - t < 2.0                                  # refused before a cluster starts
+    assert markers(finished["markers"]) == n and (finished["out"] / TABLE).stat().st_size == size
+
+
+def test_unreachable_scheduler_is_refused_within_the_timeout(tmp_path):
+    marker_dir = tmp_path / "markers"
+    marker_dir.mkdir()
+    ens = Ensemble(CountingPlanarScene(3.0, str(marker_dir)), PARAMETERS, n=2, fos=FOS)
+    t = time.perf_counter()
+    with pytest.raises(ConnectionError, match="127.0.0.1:9"):
+        run_ensemble(ens, tmp_path / "run", scheduler="tcp://127.0.0.1:9", timeout=2.0, progress=False)
+    assert time.perf_counter() - t < 10.0
+    assert markers(marker_dir) == 0 and not (tmp_path / "run" / TABLE).exists()
+
+
+def test_table_header_names_parameters_and_carries_the_hash(finished):
+    with (finished["out"] / TABLE).open() as fh:
+        first = fh.readline()
+        header = next(csv.reader(fh))
+    assert first.strip() == f"# fdem ensemble sha256={finished['ens'].fingerprint()}"
+    assert header[:4] == ["index", "status", "p_cohesion", "p_friction_angle"]
+    assert {"fos", "fos_lower", "fos_upper", "wall_s", "peak_rss_mb", "error"} <= set(header)
