@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .geometry import BrickSet, Geometry, IntermittentSet, SegmentSet, rectangle, simple_slope
 
 FOUR_SLOPE_HEIGHT = 15.0
@@ -44,27 +46,57 @@ def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_leng
     return Geometry([slope], [fabric], min_joint_length=min_joint_length)
 
 
-def muliashi_model(min_joint_length: float = 0.05) -> Geometry:
-    """The Muliashi open-pit slope of cases.md B (seed 001): 30 m x 22.5 m, 15 m bench at 65 deg,
-    five layers of intermittent bedding joints (3 m long, dip 25 deg, 3 m apart along a layer,
-    2.14 m between layers) above the toe.
+MULIASHI_SPACING_RULES = ("pitch", "gap")
 
-    Assumed: the toe 7.5 m above the base; the lowest row half a row spacing above the bedding
-    plane through the toe, so all five rows cut the face below the crest.
+
+def muliashi_model(spacing_rule: str = "pitch", above_toe: bool = True, min_joint_length: float = 0.05) -> Geometry:
+    """The Muliashi open-pit slope of cases.md B (seed 001): 30 m x 22.5 m, 15 m bench at 65 deg,
+    the model ending 7.5 m into the crest plateau; five layers of intermittent bedding joints,
+    each joint 3 m long dipping 25 deg, layers 2.14 m apart (perpendicular).
+
+    The paper's "horizontal distance of each joint in the same layer is 3 m" reads two ways:
+
+    * ``spacing_rule="pitch"``: 3 m horizontally from the start of one joint to the start of the
+      next, an along-trace period of ``3 / cos 25 = 3.31 m`` and rock bridges of 0.31 m
+      (nearly persistent layers);
+    * ``spacing_rule="gap"``: a 3 m horizontal gap between one joint's end and the next
+      one's start, a period of ``(3 cos 25 + 3) / cos 25 = 6.31 m`` and rock bridges of 3.31 m.
+
+    ``above_toe=True`` (the paper) keeps only the joints that lie wholly above the toe's
+    elevation; ``False`` keeps every joint of the five layers, the floor and the ground below
+    the toe included. Assumed: the lowest layer half a layer spacing above the bedding plane
+    through the toe; joints of a layer start at whole periods from the point of the layer
+    nearest the toe (the paper gives no phase).
     """
+    if spacing_rule not in MULIASHI_SPACING_RULES:
+        raise ValueError(f"spacing_rule must be one of {MULIASHI_SPACING_RULES}, got {spacing_rule!r}")
     width, height, bench, face = 30.0, 22.5, 15.0, 65.0
     crest = 7.5
     run = bench / math.tan(math.radians(face))
     toe_x = width - crest - run
-    slope = simple_slope(bench, face, crest_length=crest, toe_length=toe_x, base_depth=height - bench, name="slope")
-    dip = 25.0
-    t = (math.cos(math.radians(dip)), math.sin(math.radians(dip)))
-    n = (-t[1], t[0])
-    offset = toe_x * n[0] + (height - bench) * n[1]
-    # 3 m horizontal spacing between joint starts along a layer: the along-trace period is 3 / cos(dip).
-    period = 3.0 / t[0]
-    joints = IntermittentSet(dip=dip, trace_length=3.0, bridge_length=period - 3.0, row_spacing=2.14,
-                             stagger=0.0, offset=offset + 0.5 * 2.14, rows=(0, 4), name="bedding")
+    toe_y = height - bench
+    slope = simple_slope(bench, face, crest_length=crest, toe_length=toe_x, base_depth=toe_y, name="slope")
+    dip = math.radians(25.0)
+    t = np.array([math.cos(dip), math.sin(dip)])
+    n = np.array([-t[1], t[0]])
+    trace, layer = 3.0, 2.14
+    period = 3.0 / t[0] if spacing_rule == "pitch" else (3.0 * t[0] + 3.0) / t[0]
+    toe = np.array([toe_x, toe_y])
+    segments = []
+    reach = math.hypot(width, height)
+    for row in range(5):
+        origin = toe + (row + 0.5) * layer * n
+        for k in range(-int(reach / period) - 2, int(reach / period) + 2):
+            a = origin + k * period * t
+            b = a + trace * t
+            if above_toe and min(a[1], b[1]) < toe_y:
+                continue
+            if max(a[0], b[0]) < 0 or min(a[0], b[0]) > width or max(a[1], b[1]) < 0 or min(a[1], b[1]) > height:
+                continue
+            if not slope.contains(np.array([a, b, 0.5 * (a + b)])).any():
+                continue
+            segments.append([a[0], a[1], b[0], b[1]])
+    joints = SegmentSet(np.array(segments), name=f"bedding ({spacing_rule})")
     return Geometry([slope], [joints], min_joint_length=min_joint_length)
 
 
