@@ -44,6 +44,28 @@ Use
     contact.activate_cracks(broken_ids, friction_angle=joint_phi_of_those_cracks)
     ledger.update(contact.energy_terms())
 
+Softening crack elements
+------------------------
+An element that has started to soften or slide (the crack set's status flags) still ties its
+two triangles, but no longer keeps the *vertex neighbours* around its two mesh vertices (the
+triangles of the fan around a vertex that share no edge) from passing into each other: only
+contact resists that. Two ways to hand them to contact (``softening=``):
+
+* ``"vertex"`` (default): a mesh vertex becomes *loose* once an inelastic (or broken) crack
+  element ending there has opened or slid, at either end, by more than ``loose_fraction``
+  (default :data:`LOOSE_FRACTION`) of the smaller altitude of its two triangles; the
+  candidate pairs it adds are the vertex-neighbour pairs of the fan around it (topology, no
+  search). Loose vertices stay loose. While nothing has broken and the mesh is one body,
+  these fan pairs are the whole pair list: no broad phase runs and nothing is re-searched
+  when nodes move (the list does not depend on positions). Once an element breaks (or with
+  several bodies) the fan triangles join the contactors of the binned-grid search.
+  Below the threshold a fan's vertex neighbours overlap only at their shared corner, by the
+  elastic compression of the crack elements around it, as they do while every element is
+  elastic (when contact is dormant); ``tests/test_contact_skip.py`` checks the pairs and the
+  forces against ``"all"``.
+* ``"all"``: every triangle of every inelastic element becomes a contactor at once and is
+  searched against every other contactor (boundary triangles included).
+
 Friction belongs to the interface
 ---------------------------------
 A pair of triangles across a broken crack element uses that element's residual friction
@@ -164,6 +186,11 @@ def _mu_from(friction_angle, mu, n: int, what: str) -> np.ndarray | None:
 INELASTIC_CHECK_EVERY = 16
 """Steps between looks at which crack elements have started to soften or slide (a count of
 the crack set's status flags; a few steps of delay let no overlap grow that matters)."""
+LOOSE_FRACTION = 1e-3
+"""Default relative motion at which a softening crack element loosens its two mesh vertices:
+an end of the element has opened or slid by more than this fraction of the smaller altitude
+of its two triangles (see "Softening crack elements" in the module docstring)."""
+SOFTENING_MODES = ("vertex", "all")
 
 
 class ContactSet:
@@ -209,6 +236,11 @@ class ContactSet:
         are handed to contact at the start of the next :meth:`add_forces`, with the residual
         friction of their joint set (``cracks.interfaces``), reduced by the same factor ``F``
         as the crack elements; register the crack set before the contact set.
+    softening : {"vertex", "all"}
+        How softening and sliding crack elements hand their triangles to contact (module
+        docstring, "Softening crack elements"); default ``"vertex"``.
+    loose_fraction : float
+        Relative motion that loosens a softening element's vertices (``softening="vertex"``).
 
     The solver calls :meth:`add_forces`, :meth:`energy_terms` and :meth:`stable_dt`.
     """
@@ -217,9 +249,17 @@ class ContactSet:
                  tangential_ratio: float = 1.0, damping_ratio: float = 0.0,
                  mass: np.ndarray | None = None, skin: float | None = None,
                  cell_size: float | None = None, x: np.ndarray | None = None,
-                 check_overlap: bool = True, cracks=None) -> None:
+                 check_overlap: bool = True, cracks=None, softening: str = "vertex",
+                 loose_fraction: float = LOOSE_FRACTION) -> None:
         self.topology = topology
         self.cracks = cracks
+        if softening not in SOFTENING_MODES:
+            raise ValueError(f"softening must be one of {SOFTENING_MODES}, got {softening!r}")
+        self.softening = softening
+        loose_fraction = float(loose_fraction)
+        if not (np.isfinite(loose_fraction) and loose_fraction >= 0.0):
+            raise ValueError(f"loose_fraction must be >= 0 and finite, got {loose_fraction!r}")
+        self.loose_fraction = loose_fraction
         n_tri = topology.n_triangles
         self.penalty = _check_penalty("penalty", penalty)
         tangential_ratio = float(tangential_ratio)
@@ -254,6 +294,7 @@ class ContactSet:
         self._altitude = 2.0 * np.abs(topology.triangle_area0) / self._edge_max
         # Face-to-face normal stiffness of each triangle, 6 p L / h (see stable_dt).
         self._kt_tri = tangential_ratio * 6.0 * self.penalty * self._edge_max / self._altitude
+        self._loose_gap2 = None  # (n_cracks,) squared end motion that loosens an element's vertices
         self._kt_pair = np.zeros(0)
         if skin is None:
             skin = 0.3 * float(edges.mean()) if edges.size else 1.0
@@ -273,6 +314,13 @@ class ContactSet:
         self._any_extra_contactor = False
         self._n_inelastic_seen = 0
         self._n_bodies = int(np.unique(topology.triangle_body).size)
+        # loose mesh vertices (softening="vertex") and the fans around them
+        mesh_node = np.asarray(topology.mesh_node, dtype=np.int64)
+        self._n_vertex = int(mesh_node.max()) + 1 if mesh_node.size else 0
+        self._loose = np.zeros(self._n_vertex, dtype=bool)
+        self._any_loose = False
+        self._fan = None            # (vertex ptr, triangles) CSR, built on first need
+        self._watch = None          # inelastic elements whose vertices are not both loose yet
         self._refresh_active()
 
         # pair state
@@ -328,12 +376,48 @@ class ContactSet:
 
     @property
     def dormant(self) -> bool:
-        """True while there is nothing that can touch: one body, no broken crack element and no
-        contactor beyond the external boundary."""
-        return self._n_bodies <= 1 and not self._any_broken and not self._any_extra_contactor
+        """True while there is nothing that can touch: one body, no broken crack element, no
+        contactor beyond the external boundary and no loose vertex."""
+        return (self._n_bodies <= 1 and not self._any_broken and not self._any_extra_contactor
+                and not self._any_loose)
+
+    @property
+    def full_search(self) -> bool:
+        """True when the pairs come from the binned-grid search (several bodies, a broken
+        element, or contactors added); False while only fans of loose vertices can touch."""
+        return self._n_bodies > 1 or self._any_broken or self._any_extra_contactor
+
+    @property
+    def loose_vertices(self) -> np.ndarray:
+        """Sorted mesh-vertex ids loosened by softening crack elements (``softening="vertex"``)."""
+        return np.flatnonzero(self._loose)
+
+    def _fan_csr(self) -> tuple[np.ndarray, np.ndarray]:
+        """Triangles around each mesh vertex: ``tri[ptr[v]:ptr[v+1]]`` (sorted)."""
+        if self._fan is None:
+            mesh_node = np.asarray(self.topology.mesh_node, dtype=np.int64)
+            order = np.lexsort((np.arange(mesh_node.size) // 3, mesh_node))
+            ptr = np.zeros(self._n_vertex + 1, np.int64)
+            np.add.at(ptr, mesh_node + 1, 1)
+            self._fan = (np.cumsum(ptr), (order // 3).astype(np.int64))
+        return self._fan
+
+    def fan_pairs(self) -> np.ndarray:
+        """(n, 2) sorted vertex-neighbour pairs ``i < j`` around the loose vertices that no intact
+        crack element bonds: the candidates while nothing has broken (module docstring)."""
+        if not self._any_loose:
+            return np.zeros((0, 2), np.int64)
+        ptr, tri = self._fan_csr()
+        pi, pj = kc.fan_pairs(ptr, tri, np.flatnonzero(self._loose).astype(np.int64), self._bond)
+        n_tri = self.topology.n_triangles
+        keys = np.unique(pi * n_tri + pj)
+        return np.column_stack([keys // n_tri, keys % n_tri])
 
     def _refresh_active(self) -> None:
-        self._active = np.flatnonzero(self._is_contactor).astype(np.int64)
+        member = self._is_contactor
+        if self._any_loose:
+            member = member | self._loose[self.topology.mesh_node].reshape(-1, 3).any(axis=1)
+        self._active = np.flatnonzero(member).astype(np.int64)
         self._slot = np.full(self.topology.n_triangles, -1, dtype=np.int64)
         self._slot[self._active] = np.arange(self._active.size)
 
@@ -369,8 +453,21 @@ class ContactSet:
         self._bond[tri[:, 0], cn[:, 0] % 3] = -1
         self._bond[tri[:, 1], cn[:, 2] % 3] = -1
         self._is_contactor[tri.ravel()] = True
+        if self.softening == "vertex" and self.cracks is not None:
+            # a broken element frees the fans around both its vertices
+            self._loosen(self.topology.mesh_node[cn[:, :2]].ravel())
         self._refresh_active()
         self._needs_search = True
+
+    def _loosen(self, vertices: np.ndarray) -> bool:
+        """Mark mesh vertices loose; True if any was not yet."""
+        vertices = np.asarray(vertices, dtype=np.int64)
+        new = vertices[~self._loose[vertices]]
+        if new.size == 0:
+            return False
+        self._loose[new] = True
+        self._any_loose = True
+        return True
 
     def add_contactors(self, triangles) -> None:
         """Let ``triangles`` touch anything they are not bonded to (their bonds are kept)."""
@@ -383,18 +480,46 @@ class ContactSet:
         self._refresh_active()
         self._needs_search = True
 
-    def _watch_inelastic(self) -> None:
-        """Make the triangles of crack elements that have started to soften or slide contactors.
+    def _watch_inelastic(self, x: np.ndarray | None = None) -> None:
+        """Hand crack elements that have started to soften or slide to contact.
 
         A sliding or opening element lets the vertex neighbours of its two triangles, which no
         crack element ties, pass into each other; only contact resists that. Waiting until the
         element breaks would let the overlap grow unresisted (by the element's slip, up to
-        centimetres) and then push it apart at once, creating energy.
+        centimetres) and then push it apart at once, creating energy. ``softening="all"``:
+        every triangle of such an element becomes a contactor. ``"vertex"``: its two mesh
+        vertices become loose once an end has moved ``loose_fraction`` of the altitude
+        (module docstring), checked at positions ``x``.
         """
         n = self.cracks.n_inelastic()
-        if n != self._n_inelastic_seen:
+        if self.softening == "all":
+            if n != self._n_inelastic_seen:
+                self._n_inelastic_seen = n
+                self.add_contactors(self.topology.crack_triangles[self.cracks.inelastic()].ravel())
+            return
+        if n != self._n_inelastic_seen or self._watch is None:
             self._n_inelastic_seen = n
-            self.add_contactors(self.topology.crack_triangles[self.cracks.inelastic()].ravel())
+            ids = self.cracks.inelastic() if n else np.zeros(0, np.int64)
+            ends = self.topology.mesh_node[self.topology.crack_nodes[ids, :2]]
+            self._watch = ids[~(self._loose[ends[:, 0]] & self._loose[ends[:, 1]])]
+        if self._watch.size == 0 or x is None:
+            return
+        ids = self._watch
+        cn = self.topology.crack_nodes[ids]            # [A_p, A_q, B_q, B_p]
+        gp = x[cn[:, 0]] - x[cn[:, 3]]
+        gq = x[cn[:, 1]] - x[cn[:, 2]]
+        gap2 = np.maximum((gp * gp).sum(axis=1), (gq * gq).sum(axis=1))
+        if self._loose_gap2 is None:
+            alt = self._altitude[self.topology.crack_triangles].min(axis=1)
+            self._loose_gap2 = (self.loose_fraction * alt) ** 2
+        moved = gap2 > self._loose_gap2[ids]
+        if not moved.any():
+            return
+        ends = self.topology.mesh_node[cn[moved, :2]]
+        self._watch = ids[~moved]
+        if self._loosen(ends.ravel()):
+            self._refresh_active()
+            self._needs_search = True
 
     def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
         """Set the base face friction of ``triangles`` (default all), as ``friction_angle`` [deg]
@@ -451,9 +576,13 @@ class ContactSet:
 
     # ------------------------------------------------------------------ search
     def search(self, x: np.ndarray) -> None:
-        """Re-run the broad phase at positions ``x``; carry the friction history of surviving pairs."""
+        """Re-run the broad phase at positions ``x`` (while only fans of loose vertices can
+        touch, take their pairs instead); carry the friction history of surviving pairs."""
         x = np.ascontiguousarray(x, dtype=np.float64)
-        pairs = candidate_pairs(x, self._active, self._bond, self.skin, self.cell_size)
+        if self.full_search:
+            pairs = candidate_pairs(x, self._active, self._bond, self.skin, self.cell_size)
+        else:
+            pairs = self.fan_pairs()
         n_tri = self.topology.n_triangles
         keys = pairs[:, 0] * n_tri + pairs[:, 1]
         history = np.empty((len(pairs), kc.N_HIST))
@@ -482,8 +611,8 @@ class ContactSet:
     def _maybe_search(self, x: np.ndarray) -> None:
         if self._needs_search or self._x_search is None:
             self.search(x)
-        elif kc.max_displacement(x, self._x_search, self._active) > 0.5 * self.skin:
-            self.search(x)
+        elif self.full_search and kc.max_displacement(x, self._x_search, self._active) > 0.5 * self.skin:
+            self.search(x)   # (fan pairs do not depend on positions: nothing to re-search)
 
     # ------------------------------------------------------------------ the solver's interface
     def add_forces(self, x: np.ndarray, v: np.ndarray, f: np.ndarray, dt: float, step: int) -> None:
@@ -499,7 +628,7 @@ class ContactSet:
             if ids.size:
                 self.activate_cracks(ids)
             if step % INELASTIC_CHECK_EVERY == 0:
-                self._watch_inelastic()
+                self._watch_inelastic(x)
         if self.dormant:
             return
         if v is None:  # no velocities: no slip or damping increments this step
@@ -600,6 +729,7 @@ class ContactSet:
             "needs_search": bool(self._needs_search), "n_searches": int(self.n_searches),
             "e_normal": float(self._e_normal), "e_tangential": float(self._e_tangential),
             "w_tangential": float(self._w_tangential), "w_damping": float(self._w_damping),
+            "loose": self._loose.copy(),
         }
         for name in self._PAIR_STATE:
             d["pair" + name if name[0] == "_" else name] = np.array(getattr(self, name), copy=True)
@@ -629,4 +759,7 @@ class ContactSet:
         self._e_tangential = float(d["e_tangential"])
         self._w_tangential = float(d["w_tangential"])
         self._w_damping = float(d["w_damping"])
+        self._loose[:] = d.get("loose", False)
+        self._any_loose = bool(self._loose.any())
+        self._watch = None   # rebuilt from the crack set's flags at the next look
         self._refresh_active()

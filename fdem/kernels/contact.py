@@ -1091,6 +1091,36 @@ def grid_pairs(box, active, bond, x, gap, cell, max_cells):
 
 
 @njit(cache=True, error_model="numpy")
+def fan_pairs(ptr, tri, vertices, bond):
+    """Vertex-neighbour pairs ``(i, j)``, ``i < j``, of the triangles around each of ``vertices``
+    (``tri[ptr[v]:ptr[v+1]]``) that no intact crack element bonds (``bond``, -1 padded); a pair
+    around two of the vertices comes twice (the caller removes duplicates)."""
+    cnt = 0
+    for r in range(vertices.shape[0]):
+        v = vertices[r]
+        for a in range(ptr[v], ptr[v + 1]):
+            for b in range(a + 1, ptr[v + 1]):
+                i = min(tri[a], tri[b])
+                j = max(tri[a], tri[b])
+                if i != j and not _bonded(bond, i, j):
+                    cnt += 1
+    pi = np.empty(cnt, np.int64)
+    pj = np.empty(cnt, np.int64)
+    cnt = 0
+    for r in range(vertices.shape[0]):
+        v = vertices[r]
+        for a in range(ptr[v], ptr[v + 1]):
+            for b in range(a + 1, ptr[v + 1]):
+                i = min(tri[a], tri[b])
+                j = max(tri[a], tri[b])
+                if i != j and not _bonded(bond, i, j):
+                    pi[cnt] = i
+                    pj[cnt] = j
+                    cnt += 1
+    return pi, pj
+
+
+@njit(cache=True, error_model="numpy")
 def target_incidence(pair_j, slot_of_tri, n_active):
     """CSR of the pairs whose target (second triangle) is each active triangle (counting sort,
     O(n)): ``inc_pair[inc_ptr[a]:inc_ptr[a+1]]`` in pair order."""
