@@ -19,13 +19,20 @@ FOUR_SLOPE_SPACING = {"fine": 1.0, "coarse": 5.0}
 
 def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_length: float | None = None,
                      crest_length: float | None = None, base_depth: float | None = None,
-                     min_joint_length: float = 0.05) -> Geometry:
+                     min_joint_length: float = 0.05, joint_offset: float | None = None) -> Geometry:
     """The jointed slopes of cases.md A (seed 002): H = 15 m, face 45 deg, brick fabric.
 
     ``angle`` is ``"low"`` (persistent joints at 15 deg, inclined) or ``"high"`` (115 deg,
     anti-inclined). ``spacing`` is ``"fine"`` (s = 1 m, s:H = 1:15), ``"coarse"`` (s = 5 m, s:H
     = 1:3 as in the paper's text; its figure caption says 1:5, pass ``3.0`` for that) or a
     number [m]. Cross joints are perpendicular at d = 2 s, offset half a block between layers.
+
+    ``joint_offset`` places the persistent joints relative to the toe, as a fraction of the
+    spacing measured along the joints' normal: 0 puts one through the toe, 0.5 puts the toe
+    midway between two. The paper's text fixes it only through its results: in the fine models
+    "a critical persistent joint crosses the slope toe" (0), and the coarse result depends on
+    whether "the next persistent joint does not cross the slope toe", the case it reports for
+    its thick layers (0.5). Default: 0 for ``"fine"``, 0.5 for ``"coarse"`` and 0 for a number.
 
     Assumed (the paper gives no extents): toe floor 3 H, crest plateau 2 H, base H below the toe.
     """
@@ -41,7 +48,11 @@ def four_slope_model(angle: str = "low", spacing: str | float = "fine", toe_leng
     toe = (toe_length, base_depth)
     dip = FOUR_SLOPE_JOINT_DIP[angle]
     n = (-math.sin(math.radians(dip)), math.cos(math.radians(dip)))
-    offset = toe[0] * n[0] + toe[1] * n[1]
+    if joint_offset is None:
+        joint_offset = 0.5 if spacing == "coarse" else 0.0
+    if not (math.isfinite(joint_offset) and 0.0 <= joint_offset < 1.0):
+        raise ValueError(f"joint_offset must be a fraction of the spacing in [0, 1), got {joint_offset!r}")
+    offset = toe[0] * n[0] + toe[1] * n[1] + joint_offset * s
     fabric = BrickSet(dip=dip, spacing=s, offset=offset, name=f"{angle}-angle brick fabric")
     return Geometry([slope], [fabric], min_joint_length=min_joint_length)
 

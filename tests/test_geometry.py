@@ -192,16 +192,25 @@ def test_vertices_near_the_boundary_are_snapped_onto_it():
     assert np.linalg.norm(dfn.segments[:, 1] - dfn.segments[:, 0], axis=1).min() >= 0.05
 
 
-def test_four_slope_scene_has_a_persistent_joint_through_the_toe():
+def test_four_slope_joint_offset_places_the_persistent_joints_relative_to_the_toe():
+    """Offset 0 puts a persistent joint through the toe (the fine models, and the coarse ones on
+    request); the coarse default 0.5 puts the toe midway between two persistent joints."""
     from fdem.scenes import four_slope_model
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model = four_slope_model("low", "coarse")
-        dfn = model.dfn()
     toe = np.array([45.0, 15.0])
-    ends = dfn.segments.reshape(-1, 2)
-    assert np.min(np.linalg.norm(ends - toe, axis=1)) < 1e-9
+    dip = np.radians(15.0)
+    normal = np.array([-np.sin(dip), np.cos(dip)])
+    for spacing, offset, expect in (("coarse", 0.0, 0.0), ("fine", None, 0.0), ("coarse", None, 2.5)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dfn = four_slope_model("low", spacing, joint_offset=offset).dfn()
+        seg = dfn.segments
+        d = seg[:, 1] - seg[:, 0]
+        persistent = np.abs(np.cross(d / np.linalg.norm(d, axis=1, keepdims=True), [np.cos(dip), np.sin(dip)])) < 1e-6
+        dist = np.abs((seg[persistent, 0] - toe) @ normal)   # distance of each persistent line to the toe
+        assert dist.min() == pytest.approx(expect, abs=1e-6), (spacing, offset)
+    with pytest.raises(ValueError, match="joint_offset"):
+        four_slope_model("low", "fine", joint_offset=1.5)
 
 
 def test_muliashi_scene_has_five_rows_of_three_metre_joints():
