@@ -27,7 +27,7 @@ import numpy as np
 
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
-from fdem.geometry import Model as Geometry, rectangle
+from fdem.geometry import Geometry, rectangle
 from fdem.materials import ElasticMaterial
 from fdem.meshing import mesh_model
 from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
