@@ -5,7 +5,8 @@ The scene (:class:`PlanarDFNScene`) is the no-crack planar slope of ``cases/plan
 :class:`fdem.geometry.StochasticSet` of additional joints in the block above the plane. What
 is uncertain, per realization:
 
-* ``cohesion`` of the sliding plane: lognormal, mean 20 kPa, sd 5 kPa;
+* ``cohesion`` of the sliding plane: lognormal, mean 12 kPa, sd 4 kPa (the Hoek-Bray FoS at
+  the means is 1.17; the verification case has 20 kPa, FoS 1.40);
 * ``friction_angle`` of the plane and every joint: normal 30 +- 3 deg truncated to [20, 40];
 * ``dfn_seed``: the seed of the additional joints' centres, lengths and dips;
 * ``trace_length``: mean trace length of the additional joints, uniform 2-6 m (lognormal
@@ -90,7 +91,7 @@ class PlanarDFNScene:
 
 
 PARAMETERS = {
-    "cohesion": Distribution.lognormal(20e3, 5e3),
+    "cohesion": Distribution.lognormal(12e3, 4e3),
     "friction_angle": Distribution.normal(30.0, 3.0, low=20.0, high=40.0),
     "dfn_seed": Distribution.seed(),
     "trace_length": Distribution.uniform(2.0, 6.0),
