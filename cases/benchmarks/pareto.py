@@ -375,7 +375,7 @@ def tangential_study(size: float, with_fos: bool = True) -> list[dict]:
         sim = Simulation(model, providers=[cracks, contact], progress=False)
         cracks.hold_elastic(True)
         T = response_time(model)
-        stage = Stage("settle", max_time=8 * T, converge=Convergence(unbalanced_ratio=1e-5),
+        stage = Stage("settle", max_time=4 * T, converge=Convergence(unbalanced_ratio=1e-5),
                       damping=fundamental_damping(sim))
         res = run_stage(sim, stage, frames=False)
         cracks.hold_elastic(False)
@@ -461,11 +461,11 @@ def sweeps(quick: bool) -> dict:
                           (grid((0.1, 0.05), (10, 100), (0.8,)) if q else
                            grid((0.1, 0.05, 0.025), (1, 10, 100), (0.8,)) + grid((0.05,), (10,), (0.3, 0.5, 0.99)))]),
         "brazilian": (brazilian, [dict(divisions=d, alpha=a, safety=s) for d, a, s in
-                                  (grid((15, 20), (10,), (0.8,)) if q else
-                                   grid((20, 25, 40), (10,), (0.8,)) + grid((25,), (30, 100), (0.8,))
+                                  (grid((25, 35), (10,), (0.8,)) if q else
+                                   grid((25, 40, 60), (10,), (0.8,)) + grid((25,), (30, 100), (0.8,))
                                    + grid((25,), (10,), (0.5, 0.99)))]),
         "direction": (brazilian, [dict(divisions=d, angle_deg=a, G_I=g) for d, a, g in
-                                  (grid((20,), (0.0, 30.0, 60.0), (None,)) if q else
+                                  (grid((25,), (0.0, 30.0, 60.0), (None,)) if q else
                                    grid((25, 40), (0.0, 20.0, 40.0, 60.0), (None,))
                                    + grid((40,), (0.0, 40.0), (5.0, 80.0)))]),
         "incline": (incline, [dict(size=h, alpha=a, safety=s) for h, a, s in
@@ -474,18 +474,24 @@ def sweeps(quick: bool) -> dict:
         "impact": (impact, [dict(size=h, alpha=a, safety=s) for h, a, s in
                             (grid((0.25,), (10, 100), (0.2, 0.4, 0.8)) if q else
                              grid((0.25, 0.125), (10, 100, 1000), (0.2, 0.4, 0.8, 0.99)))]),
-        "planar": (planar, [dict(size=h, alpha=a, safety=s) for h, a, s in
-                            (grid((1.5,), (5,), (0.8,)) if q else
-                             grid((1.5, 1.0), (5, 20), (0.8,)) + grid((1.5,), (5,), (0.5, 0.99))
-                             + [dict(size=1.5, alpha=5, safety=0.8, tangential_ratio=30.0)])]
-                   if not q else [dict(size=1.5, alpha=5, safety=0.8)]),
+        "planar": (planar, [dict(size=1.5, alpha=5, safety=0.8)] if q else
+                   [dict(size=h, alpha=a, safety=s) for h, a, s in
+                    grid((1.5, 1.0), (5, 20), (0.8,)) + grid((1.5,), (5,), (0.5, 0.99))]
+                   + [dict(size=1.5, alpha=5, safety=0.8, tangential_ratio=30.0)]),
     }
 
 
 def run_problem(name: str, quick: bool) -> list[dict]:
     path = OUT / f"{name}.json"
     if name == "tangential":
-        rows = tangential_study(size=1.5 if quick else 1.0, with_fos=True)
+        rows = tangential_study(size=1.5 if quick else 1.0, with_fos=not quick)
+        for size in (1.0, 0.5):  # what the step costs on finer four-slope meshes (no run)
+            for tangential in ("paper", "tied"):
+                model, cracks, _ = four_slope_scene(tangential, size)
+                crit, limits = Simulation(model, providers=[cracks], progress=False).critical_dt()
+                rows.append({"problem": "tangential", "tangential": tangential, "h": size,
+                             "n_triangles": model.topology.n_triangles, "critical_dt_s": crit,
+                             "dt_limits_s": {k: float(v) for k, v in limits.items()}})
     elif name == "longrun":
         rows = [long_run(100_000 if quick else 1_000_000)]
         print(json.dumps(rows[0]), flush=True)
