@@ -235,10 +235,17 @@ class Simulation:
         Render a PNG with every output frame: displacement magnitude on the deformed mesh and
         the broken crack elements by failure mode (:func:`fdem.pictures.failure_frame`).
     providers : sequence of force providers (see the module docstring).
+    output_fields : sequence of str, optional
+        Point/cell arrays written to the triangle frames (default all: ``displacement``,
+        ``velocity``, the stresses, ``property``, ``body``); fewer fields, smaller frames.
+    compression : ``None`` (raw, default: fastest to write), ``"zlib"`` or ``"lzma"``
+        Block compression of every VTU frame (``docs/outputs.md``: zlib keeps 62 % of the bytes
+        of a 180k-triangle frame at about 13 times the write time).
     """
 
     def __init__(self, model: Model, dt: float | None = None, safety: float = 0.8, out_dir=None,
-                 name: str = "fdem", progress: bool = True, pictures: bool = False, providers=()):
+                 name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
+                 output_fields=None, compression: str | None = None):
         if not 0.0 < safety <= 1.0:
             raise ValueError(f"safety factor must lie in (0, 1], got {safety}")
         self.model = model
@@ -279,8 +286,12 @@ class Simulation:
         self.ledger = EnergyLedger(float(grav_moment.sum()), float(ext_moment.sum()), roundoff)
         self.history: list[dict] = []
         self._history_writer = out.HistoryWriter(self.out_dir / "history.csv") if self.out_dir else None
-        self._series = out.PvdSeries(self.out_dir, name) if self.out_dir else None
-        self._crack_series = (out.PvdSeries(self.out_dir, f"{name}_cracks")
+        if compression not in (None, "zlib", "lzma"):
+            raise ValueError(f"compression must be None, 'zlib' or 'lzma', got {compression!r}")
+        self._series = (out.PvdSeries(self.out_dir, name, compression=compression,
+                                      fields=None if output_fields is None else list(output_fields))
+                        if self.out_dir else None)
+        self._crack_series = (out.PvdSeries(self.out_dir, f"{name}_cracks", compression=compression)
                               if self.out_dir and topo.n_cracks > 0 else None)
         self._frames = 0
         self._stage = ""

@@ -158,3 +158,19 @@ def test_keyboard_interrupt_writes_state(tmp_path):
     assert int(state["step"]) == sim.state.step
     np.testing.assert_array_equal(state["x"], sim.state.x)
     assert (tmp_path / "interrupted_state.vtu").exists()
+
+
+def test_simulation_writes_compressed_frames_with_only_the_fields_asked_for(tmp_path):
+    import meshio
+
+    model = small_model()
+    sim = Simulation(model, providers=[Ties(model.topology, 10 * E)], out_dir=tmp_path, name="small",
+                     progress=False, output_fields=["displacement", "stress_von_mises"], compression="zlib")
+    sim.run(n_steps=20, output_every=10)
+    m = meshio.read(read_pvd(tmp_path / "small.pvd")[-1][1])
+    assert set(m.point_data) == {"displacement"} and set(m.cell_data) == {"stress_von_mises"}
+    np.testing.assert_array_equal(m.point_data["displacement"][:, :2], sim.state.x - model.topology.x0)
+    assert 'compressor="vtkZLibDataCompressor"' in open(read_pvd(tmp_path / "small.pvd")[-1][1], "rb").read(2000).decode(
+        "latin-1")
+    with pytest.raises(ValueError, match="compression"):
+        Simulation(model, out_dir=tmp_path / "x", compression="gzip")
