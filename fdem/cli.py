@@ -1,4 +1,13 @@
-"""The ``fdem`` command: ``fdem demo`` meshes the demo slope, ``fdem info FILE.msh`` reports a mesh."""
+"""The ``fdem`` command.
+
+``fdem list``                       the cases it can run, one line each
+``fdem run NAME [options]``         run a case (``fdem run NAME --help`` lists its options)
+``fdem demo [options]``             the same as ``fdem run quick-start``
+``fdem info FILE.msh``              quality report and crack-element counts of a mesh
+
+Every case takes ``--out``, ``--size``, ``--threads``, ``--max-time`` and ``--no-pictures``
+(:mod:`fdem.cases.common`).
+"""
 from __future__ import annotations
 
 import argparse
@@ -6,17 +15,40 @@ import sys
 from pathlib import Path
 
 
-def _demo(args) -> int:
-    import runpy
+def _list(args) -> int:
+    from .cases import CASES, describe
 
-    case = Path(__file__).resolve().parents[1] / "cases" / "four_slopes.py"
-    if not case.exists():
-        print("the demo case script cases/four_slopes.py is not next to this installation; "
-              "run it from a checkout: python cases/four_slopes.py --out runs/demo", file=sys.stderr)
-        return 2
-    sys.argv = [str(case), "--out", str(args.out), "--size", str(args.size), "--max-steps", str(args.max_steps)]
-    runpy.run_path(str(case), run_name="__main__")
+    width = max(len(n) for n in CASES)
+    for name in CASES:
+        print(f"{name:{width}s}  {describe(name)}")
     return 0
+
+
+def _run_case(name: str, argv: list[str]) -> int:
+    # --threads must reach NUMBA_NUM_THREADS before any kernel module imports numba
+    from .cases import case_module
+    from .cases.common import set_threads
+
+    for i, a in enumerate(argv):
+        if a == "--threads" and i + 1 < len(argv) and argv[i + 1].isdigit():
+            set_threads(int(argv[i + 1]))
+        elif a.startswith("--threads=") and a.split("=", 1)[1].isdigit():
+            set_threads(int(a.split("=", 1)[1]))
+    try:
+        module = case_module(name)
+    except KeyError as err:
+        print(f"fdem run: {err.args[0]}", file=sys.stderr)
+        return 2
+    module.main(argv)
+    return 0
+
+
+def _run(args) -> int:
+    return _run_case(args.case, args.options)
+
+
+def _demo(args) -> int:
+    return _run_case("quick-start", args.options)
 
 
 def _info(args) -> int:
@@ -33,12 +65,17 @@ def _info(args) -> int:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="fdem", description="Hybrid finite-discrete element solver for rock slopes")
+    parser = argparse.ArgumentParser(prog="fdem", description="Hybrid finite-discrete element solver for rock slopes",
+                                     epilog="fdem run NAME --help lists a case's options")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="mesh the low-angle four-slope scene, write a picture and a .vtu, run the first steps")
-    demo.add_argument("--out", type=Path, default=Path("runs/demo"))
-    demo.add_argument("--size", type=float, default=0.5)
-    demo.add_argument("--max-steps", type=int, default=3000, help="time steps to run after meshing (0: mesh only)")
+    sub.add_parser("list", help="the cases fdem can run").set_defaults(func=_list)
+    run = sub.add_parser("run", help="run a case: fdem run NAME [--out DIR --size H --threads N --max-time T "
+                                     "--no-pictures ...]", add_help=False)
+    run.add_argument("case", help="case name (fdem list)")
+    run.add_argument("options", nargs=argparse.REMAINDER, help="the case's options")
+    run.set_defaults(func=_run)
+    demo = sub.add_parser("demo", help="run the quick-start slope (fdem run quick-start)", add_help=False)
+    demo.add_argument("options", nargs=argparse.REMAINDER, help="options of the quick-start case")
     demo.set_defaults(func=_demo)
     info = sub.add_parser("info", help="quality report and crack-element counts of a .msh file")
     info.add_argument("mesh", type=Path)

@@ -1,0 +1,212 @@
+"""Block on an inclined plane (verification.md; seed 000's first validation case).
+
+A deformable block rests on a fixed base; the plane is inclined by tilting gravity by
+``theta``: ``g = 9.81 (sin theta, -cos theta)``, so "down the slope" is ``+x``. Contact carries
+the block with Coulomb friction ``mu = tan(phi)``; crack elements that never break hold each
+body together. Exact answers:
+
+* sliding (``phi < theta``): ``s(t) = g t^2 (sin theta - mu cos theta) / 2``;
+* sticking (``phi > theta``): no slip;
+* toppling (Goodman and Bray, ``phi > theta``): a block of width ``b`` and height ``h`` topples
+  when ``b / h < tan theta``.
+
+Dynamic stage: element damping (a fraction of critical of each triangle's highest mode,
+:meth:`fdem.model.Model.set_element_damping`, default ``DEFAULT_ELEMENT_DAMPING``) keeps the
+constant-strain triangles from ringing; ``--element-damping 0`` runs undamped
+(``docs/damping.md``).
+
+    fdem run block-on-incline --theta 30 --phi 20 --out runs/incline
+    python cases/block_on_incline.py --theta 30 --phi 20 --out runs/incline   # the same
+
+Writes ``--out/summary.json`` (slide against the exact answer, rotation, energies),
+``incline.pvd`` and ``history.csv``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fdem.cases.common import case_parser, check_common, set_threads
+from fdem.cohesive import CrackProperties, CrackSet
+from fdem.contact import ContactSet
+from fdem.geometry import Geometry, rectangle
+from fdem.materials import ElasticMaterial
+from fdem.meshing import mesh_model
+from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
+from fdem.solver import Simulation
+from fdem.topology import build_topology
+
+NAME = "block-on-incline"
+G = 9.81
+YOUNG, POISSON, DENSITY = 1e9, 0.25, 2700.0
+CONTACT_PENALTY = 20 * YOUNG  # Pa: p = alpha E with alpha = 20
+
+
+def unbreakable(young: float) -> CrackProperties:
+    """Crack elements that stay elastic: strengths far above any stress in these scenes."""
+    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e15, G_II=1e15, p_n=10 * young)
+
+
+def sliding_distance(theta_deg: float, phi_deg: float, t: float) -> float:
+    """``s = g t^2 (sin theta - tan phi cos theta) / 2``, zero when friction holds [m]."""
+    th = math.radians(theta_deg)
+    a = G * (math.sin(th) - math.tan(math.radians(phi_deg)) * math.cos(th))
+    return max(a, 0.0) * t * t / 2
+
+
+def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_height: float = 1.0,
+          size: float | None = None, base_length: float = 8.0,
+          element_damping: float = DEFAULT_ELEMENT_DAMPING):
+    """Model, crack set, contact set and the block's node ids.
+
+    ``size`` [m]: target element size (default half the block's smaller side);
+    ``element_damping``: fraction of critical viscosity of each triangle (0: none).
+    """
+    size = size or min(block_width, block_height) / 2
+    base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
+    x0 = 0.25 * base_length
+    block = rectangle(x0, 0.5, block_width, block_height, name="block")
+    topo = build_topology(mesh_model(Geometry([base, block]), size))
+    model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    if element_damping > 0:
+        model.set_element_damping(element_damping)
+    th = math.radians(theta_deg)
+    model.set_gravity(G * math.sin(th), -G * math.cos(th))
+    base_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 0, 3))
+    model.fix(base_nodes)
+    cracks = CrackSet(topo, {0: unbreakable(YOUNG)})
+    contact = ContactSet(topo, CONTACT_PENALTY, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
+    block_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 1, 3))
+    return model, cracks, contact, block_nodes
+
+
+def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float = 1.0, block_height: float = 1.0,
+        out_dir: Path | None = None, energy_tolerance: float | None = 0.05, size: float | None = None,
+        element_damping: float = DEFAULT_ELEMENT_DAMPING) -> dict:
+    """Release the block from rest; return its mean slide along the plane and its rotation at ``t_end``."""
+    model, cracks, contact, block = build(theta_deg, phi_deg, block_width, block_height, size=size,
+                                          element_damping=element_damping)
+    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="incline", progress=False)
+    wall = time.perf_counter()
+    x0 = sim.state.x[block].copy()
+    sim.run(t_end=t_end, output_every=10**9 if out_dir is None else None, energy_tolerance=energy_tolerance)
+    sim.close()
+    wall = time.perf_counter() - wall
+    x = sim.state.x[block]
+    slide = float((x[:, 0] - x0[:, 0]).mean())
+    # Rigid rotation of the block: angle of the best-fit rotation of its nodes about their centroid.
+    a, b = x0 - x0.mean(axis=0), x - x.mean(axis=0)
+    rotation = math.degrees(math.atan2(float((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum()),
+                                       float((a * b).sum())))
+    row = sim.history[-1] if sim.history else {}
+    return {"theta_deg": theta_deg, "phi_deg": phi_deg, "t": sim.state.time, "slide_m": slide,
+            "exact_m": sliding_distance(theta_deg, phi_deg, sim.state.time),
+            "frictionless_m": sliding_distance(theta_deg, 0.0, sim.state.time),
+            "rotation_deg": rotation, "steps": sim.state.step, "dt_s": sim.dt,
+            "triangle_dt_s": sim.triangle_dt, "n_block_triangles": int(len(block) // 3),
+            "element_damping": element_damping, "wall_s": wall,
+            "viscous_dissipation_J_per_m": float(row.get("viscous_dissipation", 0.0)),
+            "friction_work_J_per_m": float(row.get("friction", 0.0)),
+            "balance_error_relative": float(row.get("balance_error_relative", float("nan")))}
+
+
+STUDY_SIZES = (0.5, 0.25, 0.125)
+STUDY_FRACTIONS = (0.0, 0.05, 0.1, 0.2, 0.5, 1.0)
+STUDY_CASES = ((30.0, 20.0), (40.0, 25.0))
+
+
+def damping_study(path: Path, sizes=STUDY_SIZES, fractions=STUDY_FRACTIONS, cases=STUDY_CASES) -> list[dict]:
+    """Slide at 1 s against the rigid-block answer for each case, mesh size and damping fraction.
+
+    Writes the rows to ``path`` (JSON) after every run, so a partial study is kept; rows
+    already in ``path`` are not run again. Run with ``NUMBA_NUM_THREADS=1`` for comparable
+    wall times.
+    """
+    rows = json.loads(path.read_text())["runs"] if path.exists() else []
+    done = {(r["theta_deg"], r["phi_deg"], r["size_m"], r["element_damping"]) for r in rows}
+    for theta, phi in cases:
+        for size in sizes:
+            for fraction in fractions:
+                if (theta, phi, size, fraction) in done:
+                    continue
+                r = run(theta, phi, 1.0, size=size, element_damping=fraction)
+                r["size_m"] = size
+                r["slide_error"] = r["slide_m"] / r["exact_m"] - 1.0
+                rows.append(r)
+                print(f"theta {theta:g} phi {phi:g} size {size:g} damping {fraction:g}: "
+                      f"error {100 * r['slide_error']:+.3f} %, dt {r['dt_s']:.4g} s, wall {r['wall_s']:.1f} s",
+                      flush=True)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(json.dumps({"description": "block on incline, slide at 1 s vs rigid block, "
+                                            "element damping as a fraction of critical",
+                                            "runs": rows}, indent=1))
+    return rows
+
+
+def plot_study(path: Path, png: Path) -> None:
+    """Slide error against mesh size, one line per damping fraction, one panel per case (matplotlib PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = json.loads(path.read_text())["runs"]
+    cases = sorted({(r["theta_deg"], r["phi_deg"]) for r in rows})
+    fig, axes = plt.subplots(1, len(cases), figsize=(5.2 * len(cases), 4.2), squeeze=False)
+    for ax, (theta, phi) in zip(axes[0], cases):
+        mine = [r for r in rows if (r["theta_deg"], r["phi_deg"]) == (theta, phi)]
+        for fraction in sorted({r["element_damping"] for r in mine}):
+            pts = sorted((r["size_m"], 100 * r["slide_error"]) for r in mine if r["element_damping"] == fraction)
+            label = "undamped" if fraction == 0 else f"{fraction:g} of critical"
+            style = dict(lw=2.5, color="k") if fraction == DEFAULT_ELEMENT_DAMPING else dict(lw=1.2)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=label, **style)
+        ax.axhspan(-1, 1, color="0.9", zorder=0)
+        ax.axhline(0, color="0.5", lw=0.8)
+        ax.set_xscale("log", base=2)
+        ax.invert_xaxis()
+        ax.set_xlabel("element size [m] (block 1 m x 1 m)")
+        ax.set_ylabel("slide at 1 s / rigid block - 1 [%]")
+        ax.set_title(f"theta {theta:g} deg, phi {phi:g} deg")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    parser = case_parser(__doc__, out="runs/incline", size=None,
+                         size_help="element size [m] (default: half the block's smaller side)")
+    parser.add_argument("--theta", type=float, default=30.0, help="incline angle [deg]")
+    parser.add_argument("--phi", type=float, default=20.0, help="friction angle of the contact [deg]")
+    parser.add_argument("--width", type=float, default=1.0)
+    parser.add_argument("--height", type=float, default=1.0)
+    parser.add_argument("--t-end", type=float, default=1.0, help="simulated time of the slide [s]")
+    parser.add_argument("--element-damping", type=float, default=DEFAULT_ELEMENT_DAMPING,
+                        help="fraction of critical viscosity of each triangle's highest mode (0: undamped; "
+                             f"default {DEFAULT_ELEMENT_DAMPING})")
+    parser.add_argument("--damping-study", type=Path, default=None, metavar="JSON",
+                        help="run the mesh-size x damping-fraction study (docs/damping.md) into this file")
+    args = parser.parse_args(argv)
+    check_common(parser, args)
+    set_threads(args.threads)
+    if args.damping_study is not None:
+        damping_study(args.damping_study)
+        if not args.no_pictures:
+            plot_study(args.damping_study, args.damping_study.with_suffix(".png"))
+        return {"case": NAME, "study": str(args.damping_study)}
+    t_end = args.t_end if args.max_time is None else min(args.t_end, args.max_time)
+    args.out.mkdir(parents=True, exist_ok=True)
+    r = run(args.theta, args.phi, t_end, args.width, args.height, out_dir=args.out, size=args.size,
+            element_damping=args.element_damping)
+    r = {"case": NAME, **r, "time_capped": t_end < args.t_end}
+    print(json.dumps(r, indent=1))
+    (args.out / "summary.json").write_text(json.dumps(r, indent=1))
+    return r
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,188 @@
+"""The four jointed slopes of cases.md A (seed 002): brick-pattern DFN, static start, strength reduction, runout.
+
+Meshes a 15 m slope with its brick-pattern DFN, starts it in static equilibrium, reduces the
+strength of crack elements, joints and contact until it fails, and follows the failure and
+runout to rest (:mod:`fdem.workflow`).
+
+Writes to ``--out``: the mesh (``.msh``, a PNG and a ``.vtu`` with crack elements as line cells),
+``slope.pvd`` and ``slope_cracks.pvd`` (open them in ParaView), ``history.csv`` (energy ledger
+and monitors per stage), ``summary.json`` (every stage and why it ended, the factor of safety
+when searched, runout distance and volume, displacement percentiles, kinetic energy, cracks by
+mode, fragments, events: :class:`fdem.report.RunReport`), ``events.csv`` and the pictures
+``failure.png``, ``kinetic_energy.png``, ``cracks_by_mode.png`` (plus a PNG per output frame).
+
+    fdem run four-slopes --out runs/low_fine                           # the workflow at size 0.5
+    fdem run four-slopes --angle high --spacing coarse --size 0.3 --out runs/high_coarse
+    fdem run four-slopes --fos 1.0 3.0 0.02 --out runs/fos             # factor of safety first
+    fdem run four-slopes --max-steps 0 --out runs/mesh_only            # mesh and pictures only
+
+Paper (seed 002): about 180,000 triangles (``--size 0.18``), geostatic equilibrium over 500,000
+steps of 2 us, then 10 % strength reduction per 10,000 steps (``--reduction rate``). Here the
+geostatic stage is a static solve with pre-loaded crack elements, and stages end by physics
+(convergence, failure, rest), not by step counts.
+"""
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .common import cap_simulated_time, case_parser, check_common, set_threads, time_capped
+
+NAME = "four-slopes"
+# Table 1 of the paper (cases.md A): finite elements
+YOUNG, POISSON, DENSITY = 0.59e9, 0.29, 2680.0
+CONTACT_PENALTY = 10 * YOUNG  # Pa; Munjiza p = alpha E, alpha = 10 (verification.md guidance)
+GRAVITY = 9.81
+SIZE = 0.5
+
+
+def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None):
+    """Geometry, mesh and topology of one of the four slopes."""
+    from fdem.meshing import mesh_model
+    from fdem.scenes import four_slope_model
+    from fdem.topology import build_topology
+
+    geometry = four_slope_model(angle, spacing)
+    mesh = mesh_model(geometry, size, refine_near_joints=refine)
+    return geometry, mesh, build_topology(mesh)
+
+
+def ground_surface(slope):
+    """``y_s(x)``: the top of the slope profile, for the geostatic initial stress."""
+    v = slope.vertices
+    x0, _, x1, _ = slope.bounds
+    top = v[(v[:, 1] > 0) & ~(((v[:, 0] == x0) | (v[:, 0] == x1)) & (v[:, 1] == 0))]
+    top = top[np.argsort(top[:, 0], kind="stable")]
+    return lambda x: np.interp(x, top[:, 0], top[:, 1])
+
+
+def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, start: str = "static",
+               progress: bool = True):
+    """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity.
+
+    ``start="static"`` (default) puts it in static equilibrium with pre-loaded crack elements
+    (:func:`fdem.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
+    laterally confined stress ``sigma_xx = K0 sigma_yy`` of a flat ground instead (not in
+    equilibrium under the face: it needs a damped settling stage). Returns ``(sim, cracks)``."""
+    from fdem.cohesive import CrackSet, four_slope_property_sets
+    from fdem.contact import ContactSet
+    from fdem.geostatic import geostatic_start
+    from fdem.materials import ElasticMaterial
+    from fdem.model import Model, geostatic_stress
+    from fdem.solver import Simulation
+
+    model = Model(topology, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    model.set_gravity(0.0, -GRAVITY)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    cracks = CrackSet(topology, four_slope_property_sets(), contact_penalty=CONTACT_PENALTY)
+    if start == "static":
+        geostatic_start(model, cracks)
+    elif start == "k0":
+        model.set_initial_stress(geostatic_stress(DENSITY, GRAVITY, surface=ground_surface(geometry.bodies[0]),
+                                                  poisson=POISSON))
+    else:
+        raise ValueError(f"start must be 'static' or 'k0', got {start!r}")
+    contact = ContactSet(topology, CONTACT_PENALTY, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
+    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="slope", pictures=pictures,
+                     progress=progress)
+    return sim, cracks
+
+
+def main(argv=None) -> dict:
+    parser = case_parser(__doc__, out="runs/four_slopes", size=SIZE,
+                         size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
+    parser.add_argument("--angle", choices=["low", "high"], default="low")
+    parser.add_argument("--spacing", default="fine", help="'fine' (s = 1 m), 'coarse' (s = 5 m) or metres")
+    parser.add_argument("--refine", type=float, default=None, help="element size factor on joints, e.g. 0.5")
+    parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
+                        help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
+    parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
+                        help="search the factor of safety in [LOWER, UPPER] to TOL first")
+    parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
+    parser.add_argument("--max-steps", type=int, default=None, help="0: mesh and pictures only")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    args = parser.parse_args(argv)
+    check_common(parser, args)
+    set_threads(args.threads)
+    try:
+        spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
+    except ValueError:
+        parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
+
+    from fdem.analysis import slope_toe
+    from fdem.meshing import quality_report
+    from fdem.preview import plot_mesh_png, write_mesh_vtu
+    from fdem.report import RunReport
+    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine)
+        except ValueError as err:  # bad input: say what is wrong, no traceback
+            parser.error(str(err))
+    for w in caught:
+        print(f"warning: {w.message}")
+    elapsed = time.perf_counter() - t0
+    report = quality_report(mesh)
+    print(f"meshed and exploded in {elapsed:.2f} s: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
+          f"({int((topo.crack_tag > 0).sum())} on joints)")
+    print(report)
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    name = f"{args.angle}_{args.spacing}"
+    mesh.save(out / f"{name}.msh")
+    vtu = write_mesh_vtu(topo, out / f"{name}_mesh.vtu")
+    written = [vtu]
+    if not args.no_pictures:
+        written.append(plot_mesh_png(topo, out / f"{name}_mesh.png",
+                                     title=f"{args.angle}-angle {args.spacing} slope: {topo.n_triangles} triangles"))
+    print("wrote " + ", ".join(map(str, written)))
+    summary = {"case": NAME, "scene": name, "size_m": args.size, "n_triangles": topo.n_triangles,
+               "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
+               "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
+
+    if args.max_steps != 0:
+        sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet)
+        toe_x, toe_y = slope_toe(geometry.bodies[0])
+        run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
+        cap_simulated_time(sim, args.max_time)
+        print(f"time step {sim.dt:.3g} s (critical limits: "
+              + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
+        t1 = time.perf_counter()
+        workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
+                                 runout_time=args.runout_time)
+        try:
+            result = run_slope_workflow(sim, workflow, out_dir=out)
+        finally:
+            sim.close()
+        result.pop("_fos_result", None)
+        summary.update({"workflow": result, "outcome": result["outcome"],
+                        "failed_at_factor": result["failed_at_factor"],
+                        "fos": result["fos"]["fos"] if result.get("fos") else None,
+                        "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
+                        "seconds_simulation": time.perf_counter() - t1})
+        summary = run_report.write(out, extra=summary, pictures_on=not args.no_pictures)
+        for st in result["stages"]:
+            print(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
+                  f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")
+        print(f"outcome: {summary['outcome']}"
+              + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
+              + (f"; factor of safety {summary['fos']:.3f}" if summary.get("fos") else ""))
+        print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
+              f"{summary['cracks']['broken']} crack elements broken; max displacement "
+              f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")
+    else:
+        from fdem.report import _jsonable
+
+        summary = _jsonable(summary)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    print(f"wrote {out / 'summary.json'}")
+    return summary

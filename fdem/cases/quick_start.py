@@ -1,0 +1,147 @@
+"""Quick start: a small jointed slope that stands, fails under strength reduction and runs out.
+
+A 12 m slope with a 60 deg face; a persistent joint set dipping 30 deg out of the face (one
+joint through the toe) crossed by perpendicular cross joints in a brick pattern (blocks 2 m x
+4 m). The slope starts in static equilibrium (:func:`fdem.geostatic.geostatic_start`), then
+:func:`fdem.workflow.run_slope_workflow` checks equilibrium at F = 1, searches the factor of
+safety by strength reduction, reduces the strength in steps (1/0.9, 1/0.8, ...) until the slope
+fails, and follows the runout at the failing factor until the rock comes to rest.
+
+Writes to ``--out``: ``slope.pvd`` and ``slope_cracks.pvd`` (ParaView series), ``history.csv``,
+``summary.json`` (factor of safety, factor at failure, runout distance and volume, displacement
+percentiles, kinetic energy, cracks by mode, fragments, events), ``events.csv``, ``fos.json``
+and the pictures ``failure.png``, ``kinetic_energy.png``, ``cracks_by_mode.png``,
+``fos_failure.png`` (and ``fragments.png``, ``magnitudes.png`` when there are any).
+
+    fdem run quick-start --out runs/demo          # about 1,500 triangles, about a minute
+    python cases/quick_start.py --out runs/demo   # the same
+
+Chosen (not from a paper): a soft rock (E = 0.5 GPa) so that the stable step is large, and
+penalties tied ``p_t = p_n = 5 E`` (``docs/cohesive.md``: ``p = 5..10 E`` keeps the elastic
+opening at the peak far below any slip that matters, and the stiff literal shear penalty of the
+four-slope paper would cut the step several-fold). Joints ``c = 20 kPa``, ``phi = 28 deg``:
+limit equilibrium of the wedge above the toe joint gives about F = 1.2 (Hoek-Bray, dry).
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import cap_simulated_time, case_parser, check_common, set_threads, time_capped
+
+NAME = "quick-start"
+HEIGHT, FACE_ANGLE = 12.0, 60.0                 # slope height [m], face angle [deg]
+TOE_LENGTH, CREST_LENGTH, BASE_DEPTH = 26.0, 10.0, 3.0   # [m]: room for the runout in front of the toe
+JOINT_DIP, JOINT_SPACING = 30.0, 2.0            # persistent joints out of the face [deg], [m]
+YOUNG, POISSON, DENSITY = 0.5e9, 0.25, 2600.0   # rock [Pa, -, kg/m^3]
+PENALTY = 2 * YOUNG                             # p_n = p_t = contact penalty [Pa]
+GRAVITY = 9.81
+SIZE = 0.8                                      # default element size [m]
+MIN_JOINT_LENGTH = 0.3                          # joint pieces shorter than this are dropped [m]
+FOS_BRACKET = (1.0, 2.0, 0.05)                  # (stable, failing, tolerance) of the FoS search
+
+
+def geometry(height: float = HEIGHT, face_angle: float = FACE_ANGLE, joint_dip: float = JOINT_DIP,
+             spacing: float = JOINT_SPACING):
+    """The slope polygon and its brick-pattern joints, one persistent joint through the toe."""
+    from fdem.geometry import BrickSet, Geometry, simple_slope
+
+    slope = simple_slope(height, face_angle, crest_length=CREST_LENGTH, toe_length=TOE_LENGTH,
+                         base_depth=BASE_DEPTH, name="slope")
+    a = math.radians(joint_dip)
+    offset = -math.sin(a) * TOE_LENGTH + math.cos(a) * BASE_DEPTH   # n . toe, n the joints' normal
+    fabric = BrickSet(dip=joint_dip, spacing=spacing, offset=offset, name="bedding + cross joints")
+    return Geometry([slope], [fabric], min_joint_length=MIN_JOINT_LENGTH)
+
+
+def property_sets(penalty: float = PENALTY) -> dict:
+    """Tag 0 intact rock bridges, tag 1 joints; ``p_t = p_n``."""
+    from fdem.cohesive import CrackProperties
+
+    common = dict(p_n=penalty, p_t=penalty)
+    return {
+        0: CrackProperties(f_t=100e3, c=250e3, phi=35.0, G_I=50.0, G_II=500.0, name="intact rock bridges",
+                           **common),
+        1: CrackProperties(f_t=5e3, c=20e3, phi=28.0, G_I=5.0, G_II=50.0, name="joints", **common),
+    }
+
+
+def build(size: float = SIZE, out_dir: Path | None = None, pictures: bool = False, progress: bool = True):
+    """Geometry, simulation (in static equilibrium) and crack set of the quick-start slope."""
+    from fdem.cohesive import CrackSet
+    from fdem.contact import ContactSet
+    from fdem.geostatic import geostatic_start
+    from fdem.materials import ElasticMaterial
+    from fdem.meshing import mesh_model
+    from fdem.model import Model
+    from fdem.solver import Simulation
+    from fdem.topology import build_topology
+
+    geo = geometry()
+    topo = build_topology(mesh_model(geo, size))
+    model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    model.set_gravity(0.0, -GRAVITY)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    cracks = CrackSet(topo, property_sets(), contact_penalty=PENALTY)
+    start = geostatic_start(model, cracks)
+    contact = ContactSet(topo, PENALTY, friction_angle=28.0, mass=model.node_mass(), cracks=cracks)
+    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="slope", pictures=pictures,
+                     progress=progress)
+    return geo, sim, cracks, start
+
+
+def main(argv=None) -> dict:
+    parser = case_parser(__doc__, out="runs/quick_start", size=SIZE, size_help=f"element size [m] (default {SIZE})")
+    parser.add_argument("--no-fos", action="store_true", help="skip the factor-of-safety search")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    args = parser.parse_args(argv)
+    check_common(parser, args)
+    set_threads(args.threads)
+
+    from fdem.analysis import slope_toe
+    from fdem.report import RunReport
+    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+
+    wall = time.perf_counter()
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    geo, sim, cracks, start = build(args.size, out, progress=not args.quiet)
+    toe_x, toe_y = slope_toe(geo.bodies[0])
+    report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
+    cap_simulated_time(sim, args.max_time)
+    print(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
+          f"time step {sim.dt:.3g} s")
+    fos = None if args.no_fos or args.max_time is not None else FOS_BRACKET
+    try:
+        result = run_slope_workflow(sim, SlopeWorkflow(fos=fos), out_dir=out)
+    finally:
+        sim.close()
+    result.pop("_fos_result", None)
+    extra = {"case": NAME, "size_m": args.size, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
+             "geostatic_seconds": start.seconds, "workflow": result,
+             "fos": result["fos"]["fos"] if result.get("fos") else None,
+             "fos_bracket": result["fos"]["bracket"] if result.get("fos") else None,
+             "failed_at_factor": result["failed_at_factor"], "outcome": result["outcome"],
+             "wall_seconds": time.perf_counter() - wall}
+    summary = report.write(out, extra=extra, pictures_on=not args.no_pictures)
+    summary["wall_seconds"] = time.perf_counter() - wall
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    run = summary["runout"]
+    print(f"outcome {summary['outcome']}"
+          + (f", factor of safety {summary['fos']:.3f}" if summary["fos"] is not None else "")
+          + (f", failed at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
+          + f"; runout {_fmt(run.get('runout_distance_m'))} m beyond the toe, displaced area "
+          f"{_fmt(run.get('displaced_area_m2'))} m^2; {summary['cracks']['broken']} crack elements broken; "
+          f"{summary['wall_seconds']:.0f} s")
+    print(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}" + ("" if args.no_pictures else f", {out / 'failure.png'}"))
+    return summary
+
+
+def _fmt(v) -> str:
+    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else f"{v:.3g}"
