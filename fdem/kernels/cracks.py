@@ -481,6 +481,28 @@ def colour_elements(crack_triangles, n_tri):
     return col
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def end_separations(c, x, nodes, offset):
+    """Opening and slip ``(o0, s0, o1, s1)`` [m] of both ends of element ``c``, offsets
+    included, in the frame of :func:`element_update` (tangent along the mid-line of the faces,
+    normal from A into B)."""
+    i0 = nodes[c, 0]
+    i1 = nodes[c, 1]
+    i2 = nodes[c, 2]
+    i3 = nodes[c, 3]
+    mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
+    my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
+    inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
+    tx = mx * inv
+    ty = my * inv
+    d0x = x[i3, 0] - x[i0, 0]
+    d0y = x[i3, 1] - x[i0, 1]
+    d1x = x[i2, 0] - x[i1, 0]
+    d1y = x[i2, 1] - x[i1, 1]
+    return (d0x * ty - d0y * tx + offset[c, 0], d0x * tx + d0y * ty + offset[c, 1],
+            d1x * ty - d1y * tx + offset[c, 2], d1x * tx + d1y * ty + offset[c, 3])
+
+
 @njit(cache=True, fastmath=True)
 def crack_elastic_energy(x, nodes, const, state, offset, active):
     """Elastic energy stored in the live elements [J/m]: per end
@@ -489,38 +511,9 @@ def crack_elastic_energy(x, nodes, const, state, offset, active):
     e = 0.0
     for j in range(active.shape[0]):
         c = active[j]
-        i0 = nodes[c, 0]
-        i1 = nodes[c, 1]
-        i2 = nodes[c, 2]
-        i3 = nodes[c, 3]
-        mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
-        my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
-        inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
-        tx = mx * inv
-        ty = my * inv
-        Kn = const[c, 0]
-        Kt = const[c, 1]
-        op = const[c, 2]
-        Ft = Kn * op
-        dO = 1.0 / abs(const[c, 5])
-        kind = LINEAR if const[c, 5] < 0.0 else MUNJIZA
-        for end in range(2):
-            if end == 0:
-                dx = x[i3, 0] - x[i0, 0]
-                dy = x[i3, 1] - x[i0, 1]
-            else:
-                dx = x[i2, 0] - x[i1, 0]
-                dy = x[i2, 1] - x[i1, 1]
-            o = dx * ty - dy * tx + offset[c, 2 * end] - state[c, 10 + end]
-            s = dx * tx + dy * ty + offset[c, 2 * end + 1]
-            D = state[c, 3 * end]
-            sec = Kn
-            if D > 0.0:
-                sec = softening(D, kind) * Ft / (op + D * dO)
-            op_ = max(o, 0.0)
-            on_ = min(o, 0.0)
-            tau = Kt * (s - state[c, 3 * end + 2])
-            e += 0.5 * sec * op_ * op_ + 0.5 * const[c, 7] * on_ * on_ + 0.5 * tau * tau / Kt
+        o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
+        e += _end_energy(o0, s0, state[c, 0], state[c, 2], state[c, 10], const[c])
+        e += _end_energy(o1, s1, state[c, 3], state[c, 5], state[c, 11], const[c])
     return e
 
 
@@ -623,15 +616,7 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, activ
     total = 0.0
     for j in range(active.shape[0]):
         c = active[j]
-        i0 = nodes[c, 0]
-        i1 = nodes[c, 1]
-        i2 = nodes[c, 2]
-        i3 = nodes[c, 3]
-        mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
-        my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
-        inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
-        tx = mx * inv
-        ty = my * inv
+        o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
         Kn = const[c, 0]
         Kt = const[c, 1]
         op = const[c, 2]
@@ -642,14 +627,8 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, activ
         Kc = const[c, 7]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
         for end in range(2):
-            if end == 0:
-                dx = x[i3, 0] - x[i0, 0]
-                dy = x[i3, 1] - x[i0, 1]
-            else:
-                dx = x[i2, 0] - x[i1, 0]
-                dy = x[i2, 1] - x[i1, 1]
-            o = dx * ty - dy * tx + offset[c, 2 * end]
-            s = dx * tx + dy * ty + offset[c, 2 * end + 1]
+            o = o0 if end == 0 else o1
+            s = s0 if end == 0 else s1
             D = state[c, 3 * end]
             kap = state[c, 3 * end + 1]
             sp = state[c, 3 * end + 2]
