@@ -6,7 +6,7 @@ crack elements, contact), then drives it through :mod:`fdem.stages`:
 * ``intact``: crack elements held elastic at ``F = 1`` (damped);
 * ``softening``: strength reduced to ``--soften`` (damped): crack elements damage and slide,
   none has broken yet;
-* ``failing``: strength reduced to ``--fail`` (damped): elements break;
+* ``failing``: strength reduced to ``--fail`` (damped) for ``--fail-steps``: elements break;
 * ``runout``: the same strength, no damping (dynamic).
 
 Each stage runs ``--steps`` steps (a window of each phase, not the whole run: at the
@@ -205,7 +205,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--size", type=float, default=1.0, help="element size [m] of the four-slope mesh")
     ap.add_argument("--steps", type=int, default=300, help="steps per stage")
     ap.add_argument("--soften", type=float, default=2.0, help="reduction factor F of the softening stage")
-    ap.add_argument("--fail", type=float, default=6.0, help="reduction factor F of the failing and runout stages")
+    ap.add_argument("--fail", type=float, default=50.0, help="reduction factor F of the failing and runout stages")
+    ap.add_argument("--fail-steps", type=int, default=3000, help="steps of the failing stage (elements must break)")
     ap.add_argument("--contact-softening", choices=["vertex", "all"], default=None,
                     help="contact of softening elements (default: the ContactSet default)")
     ap.add_argument("--label", default="", help="label of the records (e.g. before / after)")
@@ -234,7 +235,7 @@ def main(argv=None) -> dict:
     length = args.steps * sim.dt
     stages = [Stage("intact", duration=length, reduction=1.0, hold_elastic=True, damping=damped),
               Stage("softening", duration=length, reduction=args.soften, hold_elastic=False, damping=damped),
-              Stage("failing", duration=length, reduction=args.fail, damping=damped),
+              Stage("failing", duration=args.fail_steps * sim.dt, reduction=args.fail, damping=damped),
               Stage("runout", duration=length, damping=NO_DAMPING)]
     wall = time.perf_counter()
     results = []
@@ -258,16 +259,28 @@ def main(argv=None) -> dict:
         recs = []
         for p, r in tab.items():
             recs.append(record(f"four-slope step, {p} phase ({label})", r["ms_per_step"], "ms/step",
-                               topo.n_triangles, threads, relative_to_intact=r["relative_to_intact"],
+                               topo.n_triangles, threads, label=label, relative_to_intact=r["relative_to_intact"],
+                               relative_to_triangle_step=r["ms_per_step"] / max(r["triangle step"], 1e-12),
                                parts_ms_per_step={k: r[k] for k in PARTS},
                                counts={k: r[k] for k in ("steps", "n_inelastic", "n_broken", "n_contactors",
                                                           "n_pairs", "n_touching")}))
-        save(f"profile_{label}" if args.label else "profile", recs, size_m=args.size, n_crack_elements=topo.n_cracks,
-             contact_softening=getattr(contact, 'softening', 'all'), steps_per_stage=args.steps, reduction_soften=args.soften,
-             reduction_fail=args.fail, load_average=[list(x) for x in load], wall_seconds=wall,
-             stages=[r.as_dict() for r in results],
-             note="one process; each step booked to the phase of the scene when it starts; load average "
-                  "of the shared 2-core machine before and after each stage")
+        # one file for every label: the records and settings of other labels are kept
+        import json
+
+        from records import DOCS
+        runs = {}
+        old = DOCS / "profile.json"
+        if old.exists():
+            runs = {k: v for k, v in json.loads(old.read_text()).get("runs", {}).items() if k != label}
+            recs = [r for r in json.loads(old.read_text())["records"] if r.get("label") != label] + recs
+        runs[label] = dict(size_m=args.size, n_crack_elements=topo.n_cracks,
+                           contact_softening=getattr(contact, "softening", "all"), steps_per_stage=args.steps,
+                           failing_stage_steps=args.fail_steps, reduction_soften=args.soften,
+                           reduction_fail=args.fail, load_average=[list(x) for x in load], wall_seconds=wall,
+                           stages=[r.as_dict() for r in results])
+        save("profile", recs, runs=runs,
+             note="one process per label; each step booked to the phase of the scene when it starts; load "
+                  "averages of the shared 2-core machine before and after each stage")
     return tab
 
 
