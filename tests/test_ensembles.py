@@ -249,3 +249,25 @@ def test_table_header_names_parameters_and_carries_the_hash(finished):
     assert first.strip() == f"# fdem ensemble sha256={finished['ens'].fingerprint()}"
     assert header[:4] == ["index", "status", "p_cohesion", "p_friction_angle"]
     assert {"fos", "fos_lower", "fos_upper", "wall_s", "peak_rss_mb", "error"} <= set(header)
+
+
+def test_case_cross_joints_stay_in_the_block_and_leave_the_sliding_plane_whole():
+    import warnings
+
+    from ensemble import PlanarDFNScene, ensemble
+
+    scene = PlanarDFNScene(size=2.0)
+    d, e, crest = scene.block_corners()
+    t = (e - d) / np.linalg.norm(e - d)
+    n = np.array([-t[1], t[0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for p in ensemble(n=8).sample():
+            segs = scene.cross_joints(p["dfn_seed"], p["trace_length"], p["dip_scatter"], p["joints"])
+            ends = segs.reshape(-1, 2)
+            assert np.all((ends - d) @ n >= 0.5 - 1e-9)                  # 0.25 size above the plane
+            dfn = scene.geometry(p["dfn_seed"], p["trace_length"], p["dip_scatter"], p["joints"]).dfn()
+            plane = dfn.segments[dfn.set_id == 1]
+            # The sliding plane keeps its whole length H / sin(psi_p) = 17.434 m: no bridge in it.
+            assert np.linalg.norm(plane[:, 1] - plane[:, 0], axis=1).sum() == pytest.approx(
+                10.0 / math.sin(math.radians(35.0)), rel=1e-9)
