@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="the cases fdem can run").set_defaults(func=_list)
     run = sub.add_parser("run", help="run a case: fdem run NAME [--out DIR --size H --threads N --max-time T "
-                                     "--no-pictures ...]", add_help=False)
+                                     "--no-pictures ...]")
     run.add_argument("case", help="case name (fdem list)")
     run.add_argument("options", nargs=argparse.REMAINDER, help="the case's options")
     run.set_defaults(func=_run)
@@ -80,6 +80,12 @@ def main(argv=None) -> int:
     info = sub.add_parser("info", help="quality report and crack-element counts of a .msh file")
     info.add_argument("mesh", type=Path)
     info.set_defaults(func=_info)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # a case parses its own options (argparse's REMAINDER would swallow none that start with --)
+    if argv[:1] == ["demo"]:
+        return _run_case("quick-start", argv[1:])
+    if argv[:1] == ["run"] and len(argv) > 1 and not argv[1].startswith("-"):
+        return _run_case(argv[1], argv[2:])
     args = parser.parse_args(argv)
     return args.func(args)
 

@@ -178,7 +178,7 @@ def plot_study(path: Path, png: Path) -> None:
 
 
 def main(argv=None) -> dict:
-    parser = case_parser(__doc__, out="runs/incline", size=None,
+    parser = case_parser(__doc__, name=NAME, out="runs/incline", size=None,
                          size_help="element size [m] (default: half the block's smaller side)")
     parser.add_argument("--theta", type=float, default=30.0, help="incline angle [deg]")
     parser.add_argument("--phi", type=float, default=20.0, help="friction angle of the contact [deg]")

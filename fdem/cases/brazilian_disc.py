@@ -98,7 +98,7 @@ def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = 6.0, algor
 
 
 def main(argv=None) -> dict:
-    parser = case_parser(__doc__, out="runs/brazilian", size=None,
+    parser = case_parser(__doc__, name=NAME, out="runs/brazilian", size=None,
                          size_help=f"element size [m] (default D/25 = {DIAMETER / 25:g} m; overrides --sizes)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[25], help="D / element size, one run each")
     parser.add_argument("--v-platen", type=float, default=0.05, help="speed of each platen [m/s]")

@@ -22,9 +22,12 @@ from pathlib import Path
 __all__ = ["case_parser", "set_threads", "cap_simulated_time", "time_capped"]
 
 
-def case_parser(doc: str | None, out: str, size: float | None, size_help: str) -> argparse.ArgumentParser:
-    """An ``argparse`` parser with the shared options; a case adds its own after these."""
-    parser = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
+                name: str | None = None) -> argparse.ArgumentParser:
+    """An ``argparse`` parser with the shared options; a case adds its own after these.
+    ``name``: the case's name in ``fdem run NAME`` (its usage line says so under ``fdem``)."""
+    prog = f"fdem run {name}" if name and Path(sys.argv[0]).name == "fdem" else None
+    parser = argparse.ArgumentParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path(out), help=f"output folder (default {out})")
     parser.add_argument("--size", type=float, default=size, help=size_help)
     parser.add_argument("--threads", type=int, default=None,

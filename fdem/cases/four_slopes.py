@@ -95,7 +95,7 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
 
 
 def main(argv=None) -> dict:
-    parser = case_parser(__doc__, out="runs/four_slopes", size=SIZE,
+    parser = case_parser(__doc__, name=NAME, out="runs/four_slopes", size=SIZE,
                          size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
     parser.add_argument("--angle", choices=["low", "high"], default="low")
     parser.add_argument("--spacing", default="fine", help="'fine' (s = 1 m), 'coarse' (s = 5 m) or metres")
