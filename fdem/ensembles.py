@@ -175,15 +175,22 @@ class Distribution:
 # ----------------------------------------------------------------------------- the ensemble
 def _callable_name(obj) -> str:
     """``module:qualname`` of a function, or of a dataclass instance's class with its fields."""
+    def module_of(thing) -> str:
+        # A scene defined in a script run as __main__ is named by the script's file name, so that
+        # the script and a program importing it describe the same ensemble.
+        module = getattr(thing, "__module__", "?")
+        main = getattr(sys.modules.get("__main__"), "__file__", None)
+        return Path(main).stem if module == "__main__" and main else module
+
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         cls = type(obj)
         fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-        return f"{cls.__module__}:{cls.__qualname__}{json.dumps(fields, sort_keys=True, default=repr)}"
+        return f"{module_of(cls)}:{cls.__qualname__}{json.dumps(fields, sort_keys=True, default=repr)}"
     name = getattr(obj, "__qualname__", None)
     if name is None or "<lambda>" in name or "<locals>" in name:
         raise ValueError(f"ensemble scene must be a module-level function or a dataclass instance (picklable, "
                          f"with a stable name for the description hash), got {obj!r}")
-    return f"{obj.__module__}:{name}"
+    return f"{module_of(obj)}:{name}"
 
 
 @dataclass(frozen=True)
@@ -400,7 +407,7 @@ def _check_table(path: Path, digest: str) -> set[int]:
     found, rows = read_table(path)
     if found != digest:
         raise ValueError(f"{path} holds results of another ensemble description (sha256 {found or 'missing'}, "
-                         f"this one {digest}): use another --out directory or delete the table")
+                         f"this one {digest}): write to another directory or delete the table")
     return {r["index"] for r in rows}
 
 
