@@ -143,10 +143,11 @@ def test_quick_start_smoke_run_reports_its_cap_and_the_report_fields(tmp_path):
         assert key in summary["runout"]
     assert summary["cracks"]["broken"] >= 0 and summary["n_triangles"] > 0
     assert not (tmp_path / "failure.png").exists()          # --no-pictures
-    # history.csv: one row per check, time increasing, ending at the cap
+    # history.csv: one row per check, time increasing, the last within two steps of the end
     with (tmp_path / "history.csv").open() as f:
         t = np.array([float(r["time"]) for r in csv.DictReader(f)])
-    assert np.all(np.diff(t) >= 0) and t[-1] == pytest.approx(summary["simulated_time_s"])
+    assert np.all(np.diff(t) >= 0)
+    assert t[-1] == pytest.approx(summary["simulated_time_s"], abs=2 * summary["dt_s"])
 
 
 def test_thin_wrappers_run_the_package_cases():
