@@ -54,11 +54,19 @@ Evaluation (all integrals exact)
    with the spring's stored energy, at most ``(mu F_n)^2 / 2k_t``, booked as dissipated). In a
    settled pile more than half the "overlapping" neighbour pairs are such slivers (corners
    and edges that coincide up to round-off).
-2. Overlap polygon ``D``: ``c`` clipped by the half-planes of ``t`` that cut one of ``c``'s
-   corners off (Sutherland-Hodgman on a pool of vertices referenced by index, so a kept
-   corner costs one index copy). Each corner carries
-   both triangles' barycentrics (interpolated: exact, they are affine); each edge of ``D``
-   carries a *label*, the triangle edge it lies on (``c``'s edge ``m`` or ``t``'s edge ``j``).
+2. Edges of the overlap ``D``, without building the polygon: every sum below runs over the
+   edges of ``D``, and each edge of ``D`` is the part of one triangle edge (``c``'s edge ``m``
+   or ``t``'s edge ``j``, oriented counter-clockwise) that lies inside the other triangle,
+   one interval per edge because both are convex. Along an edge the other triangle's
+   barycentrics are affine, and at its two ends they are the separating-axis values already
+   computed (``u`` for ``c``'s corners, ``v`` for ``t``'s), so the interval and the
+   barycentrics at its ends cost a division per crossing (:func:`_edge_part`). A part of
+   ``t``'s edge lying exactly on a line of ``c``'s edge is left to ``c``, so that an edge
+   the two triangles share is counted once; if round-off decides such a line differently
+   on the two sides the parts do not close (gap above ``CLOSE_TOL`` of the perimeter), and
+   that pair is evaluated by clipping instead (:func:`pair_normal_clip`: ``c`` clipped by
+   ``t``'s half-planes, Sutherland-Hodgman on a pool of vertices carrying both triangles'
+   barycentrics, the earlier evaluation, kept as the reference).
 3. Area terms by parts. ``grad phi_q = 3 b_k`` on ``S_k``, ``grad lambda_i = b_i``, so
    ``3 sum_k b_k int_{D cap S_k} lambda_i dA = int_D grad(phi_q) lambda_i dA
    = oint_dD phi_q lambda_i n dGamma - b_i int_D phi_q dA``, and ``phi_q = 0`` on ``q``'s own
@@ -114,6 +122,9 @@ give exact zeros (no fused multiply-add)."""
 TOUCH_EPS = 1e-12
 """Relative reach below which a pair counts as touching, not overlapping (see :func:`_sat`):
 round-off slivers of settled neighbours skip the narrow phase (bound in the module docstring)."""
+CLOSE_TOL = 1e-9
+"""Relative gap (to the perimeter) above which the edge parts of an overlap do not close and the
+pair is evaluated by clipping instead (see :func:`_overlap`)."""
 PARALLEL_MIN_PAIRS = 4096
 """Below this many candidate pairs the per-step kernels run serially: waking the thread pool
 costs more than the work (and far more on a loaded machine, where OpenMP workers spin)."""
@@ -234,18 +245,22 @@ def _fmin(s, l0, l1, l2, d0, d1, d2):
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 def _edge_integrals(pool, a, b, lq):
     """``(int_0^1 f ds, int_0^1 f s ds)`` along the overlap edge ``a -> b`` of
-    ``f = max(min_k lambda^q_k, 0)``, ``lambda^q`` in columns ``lq:lq+3`` of ``pool``.
+    ``f = max(min_k lambda^q_k, 0)``, ``lambda^q`` in columns ``lq:lq+3`` of ``pool``
+    (:func:`_line_integrals` of the values at ``a`` and their change to ``b``)."""
+    l0 = pool[a, lq]
+    l1 = pool[a, lq + 1]
+    l2 = pool[a, lq + 2]
+    return _line_integrals(l0, l1, l2, pool[b, lq] - l0, pool[b, lq + 1] - l1, pool[b, lq + 2] - l2)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _line_integrals(l0, l1, l2, d0, d1, d2):
+    """``(int_0^1 f ds, int_0^1 f s ds)`` of ``f(s) = max(min_k (l_k + s d_k), 0)``.
 
     ``f`` is linear between the kinks ``0 <= s1 <= s2 <= 1`` of the minimum, so both integrals
     are exact: trapezoids for ``int f``, ``h (2 f_u u + f_u w + f_w u + 2 f_w w) / 6`` for
     ``int f s`` on a piece ``[u, w]`` of length ``h``.
     """
-    l0 = pool[a, lq]
-    l1 = pool[a, lq + 1]
-    l2 = pool[a, lq + 2]
-    d0 = pool[b, lq] - l0
-    d1 = pool[b, lq + 1] - l1
-    d2 = pool[b, lq + 2] - l2
     s1, s2, k1, k2, k3 = _kinks(l0, l1, l2, d0, d1, d2)
     f0 = max(min(l0, min(l1, l2)), 0.0)
     f3 = _fmin(1.0, l0, l1, l2, d0, d1, d2)
@@ -274,7 +289,7 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
     counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
     ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
-    Returns ``(overlap?, u00, u01, ..., u22)``.
+    Returns ``(overlap?, u00, u01, ..., u22, v00, v01, ..., v22)``.
     """
     # differences D_ik = t_k - c_i
     d00x = t0x - c0x
@@ -320,7 +335,8 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     reach_t = min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22)))
     reach_c = min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22)))
     hit = reach_t > TOUCH_EPS * (u00 + u01 + u02) and reach_c > TOUCH_EPS * (v00 + v01 + v02)
-    return hit, u00, u01, u02, u10, u11, u12, u20, u21, u22
+    return (hit, u00, u01, u02, u10, u11, u12, u20, u21, u22,
+            v00, v01, v02, v10, v11, v12, v20, v21, v22)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -337,9 +353,220 @@ _NONE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0
 """What :func:`pair_normal` returns for a pair that does not overlap."""
 
 
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _span(a0, a1, a2, b0, b1, b2, strict):
+    """Part ``[lo, hi]`` of ``s in [0, 1]`` where all three ``l_k(s) = a_k + s (b_k - a_k) >= 0``
+    (an edge of one triangle inside the other: ``l`` the other's barycentrics times its
+    ``2A``). ``strict``: a ``k`` with ``l_k = 0`` all along (the edge lies on the other's edge
+    line) leaves nothing. Returns ``(lo, hi)``; nothing is left when ``hi <= lo``."""
+    lo = 0.0
+    hi = 1.0
+    for k in range(3):
+        a = a0 if k == 0 else (a1 if k == 1 else a2)
+        b = b0 if k == 0 else (b1 if k == 1 else b2)
+        if a < 0.0:
+            if b < 0.0:
+                return 1.0, 0.0
+            lo = max(lo, a / (a - b))
+        elif b < 0.0:
+            hi = min(hi, a / (a - b))
+        elif strict and a == 0.0 and b == 0.0:
+            return 1.0, 0.0
+    return lo, hi
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _edge_part(px, py, qx, qy, a0, a1, a2, b0, b1, b2, scale, strict):
+    """The edge of D on the triangle edge ``p -> q``: the part where the other triangle's
+    barycentrics, ``a_k`` at ``p`` and ``b_k`` at ``q`` (times its ``2A = 1 / scale``), are all
+    ``>= 0``. Returns ``(ok, ax, ay, dx, dy, I_f, I_fs)``: start ``a``, direction ``d`` and the
+    integrals of ``f = max(min_k lambda_k, 0)`` along it (:func:`_line_integrals`)."""
+    lo, hi = _span(a0, a1, a2, b0, b1, b2, strict)
+    if not hi > lo:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    ex = qx - px
+    ey = qy - py
+    h = hi - lo
+    i_f, i_fs = _line_integrals(a0 + lo * (b0 - a0), a1 + lo * (b1 - a1), a2 + lo * (b2 - a2),
+                                h * (b0 - a0), h * (b1 - a1), h * (b2 - a2))
+    return True, px + lo * ex, py + lo * ey, h * ex, h * ey, i_f * scale, i_fs * scale
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def _add_edge(acc, ok, ax, ay, dx, dy, i_f, i_fs, c_owns, gtx, gty):
+    """Add the terms of one overlap edge ``a -> a + d`` to the sums ``acc = (area2, mx6, my6,
+    phi_c, phi_t, nx, ny, txx, txy, tyx, tyy, sum dx, sum dy, sum |dx| + |dy|)`` (module
+    docstring, "Evaluation"; the last three check that the edges close)."""
+    if not ok:
+        return acc
+    area2, mx6, my6, phi_c, phi_t, nx, ny, txx, txy, tyx, tyy, gx, gy, perim = acc
+    cr = ax * dy - ay * dx                  # a x b: twice the fan from c's centroid
+    area2 += cr
+    mx6 += cr * (2.0 * ax + dx)
+    my6 += cr * (2.0 * ay + dy)
+    if c_owns:     # t's potential on c's boundary: fan from t's centroid
+        phi_t += (cr - (gtx * dy - gty * dx)) * i_f
+        sx = -dy
+        sy = dx
+    else:
+        phi_c += cr * i_f
+        sx = dy
+        sy = -dx
+    mx = ax * i_f + dx * i_fs
+    my = ay * i_f + dy * i_fs
+    return (area2, mx6, my6, phi_c, phi_t, nx + sx * i_f, ny + sy * i_f,
+            txx + sx * mx, txy + sx * my, tyx + sy * mx, tyy + sy * my, gx + dx, gy + dy, perim + abs(dx) + abs(dy))
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _forces_from_sums(acc, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y,
+                      penalty, w):
+    """Nodal forces into ``w[0:12]`` and the :func:`pair_normal` tuple from the edge sums ``acc``
+    (:func:`_add_edge`)."""
+    area2, mx6, my6, phi_c, phi_t, nx, ny, txx, txy, tyx, tyy = acc[:11]
+    if not area2 > 0.0:
+        return _NONE
+    area = 0.5 * area2
+    # int_D phi dA = area / 3 + 2 sum (fan area x int f ds) over the other's edges
+    ic_ = area / 3.0 + phi_c
+    it_ = area / 3.0 + phi_t
+    p3 = 3.0 * penalty
+    # F_i = 3p (N / 3 + T b_i) - p b_i int_D phi dA on c; on t -N and T_t = -T + N (x) G_t
+    w[0] = penalty * nx + p3 * (txx * bc0x + txy * bc0y) - penalty * bc0x * ic_
+    w[1] = penalty * ny + p3 * (tyx * bc0x + tyy * bc0y) - penalty * bc0y * ic_
+    w[2] = penalty * nx + p3 * (txx * bc1x + txy * bc1y) - penalty * bc1x * ic_
+    w[3] = penalty * ny + p3 * (tyx * bc1x + tyy * bc1y) - penalty * bc1y * ic_
+    w[4] = penalty * nx + p3 * (txx * bc2x + txy * bc2y) - penalty * bc2x * ic_
+    w[5] = penalty * ny + p3 * (tyx * bc2x + tyy * bc2y) - penalty * bc2y * ic_
+    txx = nx * gtx - txx
+    txy = nx * gty - txy
+    tyx = ny * gtx - tyx
+    tyy = ny * gty - tyy
+    w[6] = -penalty * nx + p3 * (txx * bt0x + txy * bt0y) - penalty * bt0x * it_
+    w[7] = -penalty * ny + p3 * (tyx * bt0x + tyy * bt0y) - penalty * bt0y * it_
+    w[8] = -penalty * nx + p3 * (txx * bt1x + txy * bt1y) - penalty * bt1x * it_
+    w[9] = -penalty * ny + p3 * (tyx * bt1x + tyy * bt1y) - penalty * bt1y * it_
+    w[10] = -penalty * nx + p3 * (txx * bt2x + txy * bt2y) - penalty * bt2x * it_
+    w[11] = -penalty * ny + p3 * (tyx * bt2x + tyy * bt2y) - penalty * bt2y * it_
+    e = penalty * (ic_ + it_)
+    gx = mx6 / (3.0 * area2)    # int_D x dA / area = (mx6 / 6) / (area2 / 2)
+    gy = my6 / (3.0 * area2)
+    return (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
+
+
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def pair_normal(x, i, j, penalty, w, iw, pool):
     """Distributed-potential normal contact of one triangle pair (the per-pair law).
+
+    Parameters
+    ----------
+    x : (n_nodes, 2) float64
+        Node positions [m]; triangle ``t`` has nodes ``3t, 3t+1, 3t+2`` (counter-clockwise).
+    i, j : int
+        Contactor ``c`` and target ``t``.
+    penalty : float
+        ``p`` [Pa]; ``E = p int_D (phi_c + phi_t) dA``.
+    w : (N_WORK,) float64, iw : (N_IWORK,) int64, pool : (MAX_VERT, N_COL) float64
+        Work space (``iw`` and ``pool`` are used only by :func:`pair_normal_clip`). On return
+        ``w[0:12]`` holds the nodal forces on ``c`` (0:6) and ``t`` (6:12) [N/m] when the
+        triangles overlap (it is not written otherwise).
+
+    Returns
+    -------
+    (E, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
+        Pair energy ``E`` [J/m]; overlap area [m^2] (0 when apart or touching: then nothing
+        else is meaningful); overlap centroid ``(gx, gy)`` and t's centroid ``(gtx, gty)``, both
+        relative to c's centroid [m]; the barycentric gradients ``b_k`` of c and of t [1/m]
+        (``lambda_k = 1/3 + b_k . (x - G)``, for the friction point).
+    """
+    c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
+    sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+    if not sat[0]:
+        return _NONE
+    return _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
+    """:func:`pair_normal` of a pair that passed the separating-axis test, from its corners and
+    the separating-axis values ``u_ij = 2A_t lambda^t_j(c_i)``, ``v_kj = 2A_c lambda^c_j(t_k)``
+    (``sat``, the tuple of :func:`_sat`): no polygon is built. Every edge of the overlap ``D`` is the part of one
+    triangle edge inside the other triangle (both convex), found from the other's barycentrics
+    at the edge's two ends (linear along it), so the six edge parts are independent; a part of
+    ``t``'s edge lying on a line of ``c``'s edge is left to ``c`` (``strict``), so that an edge
+    the two triangles share is counted once. Where round-off decides the two sides of such a
+    shared line differently (the edge parts then fail to close: a gap above ``CLOSE_TOL`` of
+    the perimeter, seen only for edges collinear to round-off), the pair is evaluated by
+    clipping instead (:func:`_overlap_clip`, work space ``iw``, ``pool``)."""
+    (_, u00, u01, u02, u10, u11, u12, u20, u21, u22, v00, v01, v02, v10, v11, v12, v20, v21, v22) = sat
+    # local frame at c's centroid; barycentric gradients b_k = rot(P_{k+1} - P_{k+2}) / 2A
+    ox = (c0x + c1x + c2x) / 3.0
+    oy = (c0y + c1y + c2y) / 3.0
+    ic = 1.0 / ((c1x - c0x) * (c2y - c0y) - (c1y - c0y) * (c2x - c0x))
+    it = 1.0 / ((t1x - t0x) * (t2y - t0y) - (t1y - t0y) * (t2x - t0x))
+    bc0x = (c1y - c2y) * ic
+    bc0y = (c2x - c1x) * ic
+    bc1x = (c2y - c0y) * ic
+    bc1y = (c0x - c2x) * ic
+    bc2x = (c0y - c1y) * ic
+    bc2y = (c1x - c0x) * ic
+    bt0x = (t1y - t2y) * it
+    bt0y = (t2x - t1x) * it
+    bt1x = (t2y - t0y) * it
+    bt1y = (t0x - t2x) * it
+    bt2x = (t0y - t1y) * it
+    bt2y = (t1x - t0x) * it
+    gtx = (t0x + t1x + t2x) / 3.0 - ox
+    gty = (t0y + t1y + t2y) / 3.0 - oy
+    p0x = c0x - ox
+    p0y = c0y - oy
+    p1x = c1x - ox
+    p1y = c1y - oy
+    p2x = c2x - ox
+    p2y = c2y - oy
+    q0x = t0x - ox
+    q0y = t0y - oy
+    q1x = t1x - ox
+    q1y = t1y - oy
+    q2x = t2x - ox
+    q2y = t2y - oy
+    acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    # c's edges (m opposite corner m, from corner m+1 to m+2) inside t; f from t's barycentrics
+    r = _edge_part(p1x, p1y, p2x, p2y, u10, u11, u12, u20, u21, u22, it, False)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], True, gtx, gty)
+    r = _edge_part(p2x, p2y, p0x, p0y, u20, u21, u22, u00, u01, u02, it, False)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], True, gtx, gty)
+    r = _edge_part(p0x, p0y, p1x, p1y, u00, u01, u02, u10, u11, u12, it, False)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], True, gtx, gty)
+    # t's edges inside c; f from c's barycentrics
+    r = _edge_part(q1x, q1y, q2x, q2y, v10, v11, v12, v20, v21, v22, ic, True)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], False, gtx, gty)
+    r = _edge_part(q2x, q2y, q0x, q0y, v20, v21, v22, v00, v01, v02, ic, True)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], False, gtx, gty)
+    r = _edge_part(q0x, q0y, q1x, q1y, v00, v01, v02, v10, v11, v12, ic, True)
+    acc = _add_edge(acc, r[0], r[1], r[2], r[3], r[4], r[5], r[6], False, gtx, gty)
+    gap_x = acc[11]
+    gap_y = acc[12]
+    tol = CLOSE_TOL * acc[13]
+    if gap_x * gap_x + gap_y * gap_y > tol * tol:
+        return _overlap_by_clipping(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw,
+                                    pool)
+    return _forces_from_sums(acc, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y,
+                             penalty, w)
+
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def _overlap_by_clipping(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
+    """:func:`_overlap_clip` as a call of its own (the rare fallback of :func:`_overlap`, kept
+    out of the inlined pair loop)."""
+    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def pair_normal_clip(x, i, j, penalty, w, iw, pool):
+    """:func:`pair_normal` by clipping (Sutherland-Hodgman), the earlier evaluation, kept as
+    the reference the overlap-edge evaluation is tested against.
 
     Parameters
     ----------
@@ -362,19 +589,18 @@ def pair_normal(x, i, j, penalty, w, iw, pool):
         (``lambda_k = 1/3 + b_k . (x - G)``, for the friction point).
     """
     c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-    hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
-                                                            t0x, t0y, t1x, t1y, t2x, t2y)
-    if not hit:
+    sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+    if not sat[0]:
         return _NONE
-    return _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
-                    u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool)
+    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
-def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
-             u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool):
-    """:func:`pair_normal` of a pair that passed the separating-axis test (corners and
-    ``u_ij = 2A_t lambda^t_j(c_i)`` from :func:`_sat`): overlap polygon, edge integrals, forces."""
+def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
+    """:func:`pair_normal_clip` of a pair that passed the separating-axis test (corners and
+    the tuple of :func:`_sat`, ``u_ij = 2A_t lambda^t_j(c_i)``): overlap polygon, edge
+    integrals, forces."""
+    u00, u01, u02, u10, u11, u12, u20, u21, u22 = sat[1:10]
     # local frame at c's centroid; barycentric gradients b_k = rot(P_{k+1} - P_{k+2}) / 2A
     ox = (c0x + c1x + c2x) / 3.0
     oy = (c0y + c1y + c2y) / 3.0
@@ -472,34 +698,8 @@ def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
         tyx += sy * mx
         tyy += sy * my
         a = b
-    if not area2 > 0.0:
-        return _NONE
-    area = 0.5 * area2
-    # int_D phi dA = area / 3 + 2 sum (fan area x int f ds) over the other's edges
-    ic_ = area / 3.0 + phi_c
-    it_ = area / 3.0 + phi_t
-    p3 = 3.0 * penalty
-    # F_i = 3p (N / 3 + T b_i) - p b_i int_D phi dA on c; on t -N and T_t = -T + N (x) G_t
-    w[0] = penalty * nx + p3 * (txx * bc0x + txy * bc0y) - penalty * bc0x * ic_
-    w[1] = penalty * ny + p3 * (tyx * bc0x + tyy * bc0y) - penalty * bc0y * ic_
-    w[2] = penalty * nx + p3 * (txx * bc1x + txy * bc1y) - penalty * bc1x * ic_
-    w[3] = penalty * ny + p3 * (tyx * bc1x + tyy * bc1y) - penalty * bc1y * ic_
-    w[4] = penalty * nx + p3 * (txx * bc2x + txy * bc2y) - penalty * bc2x * ic_
-    w[5] = penalty * ny + p3 * (tyx * bc2x + tyy * bc2y) - penalty * bc2y * ic_
-    txx = nx * gtx - txx
-    txy = nx * gty - txy
-    tyx = ny * gtx - tyx
-    tyy = ny * gty - tyy
-    w[6] = -penalty * nx + p3 * (txx * bt0x + txy * bt0y) - penalty * bt0x * it_
-    w[7] = -penalty * ny + p3 * (tyx * bt0x + tyy * bt0y) - penalty * bt0y * it_
-    w[8] = -penalty * nx + p3 * (txx * bt1x + txy * bt1y) - penalty * bt1x * it_
-    w[9] = -penalty * ny + p3 * (tyx * bt1x + tyy * bt1y) - penalty * bt1y * it_
-    w[10] = -penalty * nx + p3 * (txx * bt2x + txy * bt2y) - penalty * bt2x * it_
-    w[11] = -penalty * ny + p3 * (tyx * bt2x + tyy * bt2y) - penalty * bt2y * it_
-    e = penalty * (ic_ + it_)
-    gx = mx6 / (3.0 * area2)    # int_D x dA / area = (mx6 / 6) / (area2 / 2)
-    gy = my6 / (3.0 * area2)
-    return (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
+    return _forces_from_sums((area2, mx6, my6, phi_c, phi_t, nx, ny, txx, txy, tyx, tyy), gtx, gty,
+                             bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y, penalty, w)
 
 
 @njit(cache=True, error_model="numpy")
@@ -559,14 +759,12 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
             s2y = 0.0
         j = pair_j[q]
         c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-        hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
-                                                                t0x, t0y, t1x, t1y, t2x, t2y)
+        sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
         area = 0.0
-        if hit:
+        if sat[0]:
             (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
              bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y,
-                                                            t2x, t2y, u00, u01, u02, u10, u11, u12, u20, u21,
-                                                            u22, penalty, w, iw, pool)
+                                                            t2x, t2y, sat, penalty, w, iw, pool)
         if not area > 0.0:
             if touching[q]:   # it separated: drop its history (untouched pairs have none)
                 touching[q] = 0
