@@ -13,7 +13,7 @@ import pytest
 
 from fdem.scenes import planar_slope_model
 from fdem.solver import Damping, NO_DAMPING
-from fdem.stages import Convergence, Failure, Stage, response_time, run_stage
+from fdem.stages import Convergence, Failure, Stage, fundamental_damping, response_time, run_stage
 from fdem.workflow import SlopeWorkflow, reduction_steps, run_slope_workflow
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
@@ -49,14 +49,13 @@ def test_static_start_converges_and_a_weak_slope_fails():
                              damping=Damping.quasi_static()), frames=False)
     assert r.reason == "converged" and r.unbalanced_ratio <= 1e-4
     assert r.max_displacement < 1e-3
-    # Far below its strength the block slides. Undamped, the displacement rule fires within a
-    # fraction of a second; under local damping, which resists sliding on frictional joints
-    # (it acts on each node's stick-slip force), the block creeps and the stage does not
-    # converge: non-convergence within the cap counts as failure.
+    # Far below its strength the block slides, under the damping of the reduction stages
+    # (mass-proportional, critical for the fundamental mode): the stage fails, by displacement
+    # or by not converging within its cap, and the whole block has moved.
     snap_x = sim.state.x.copy()
     r = run_stage(sim, Stage("weak", max_time=10 * T, reduction=4.0, converge=Convergence(),
-                             fail=Failure(displacement=0.02), damping=Damping.quasi_static()), frames=False)
-    assert r.reason == "capped" and r.unbalanced_ratio > 100 * 1e-4
+                             fail=Failure(displacement=0.02), damping=fundamental_damping(sim)), frames=False)
+    assert r.reason in ("failed", "capped") and r.unbalanced_ratio > 1e-4
     moved = np.linalg.norm(sim.state.x - snap_x, axis=1)[s.block_nodes]
     assert moved.min() > 1e-3   # the whole block moves
     r = run_stage(sim, Stage("weak_dynamic", max_time=10 * T, converge=Convergence(),
