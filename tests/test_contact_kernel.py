@@ -1,5 +1,5 @@
-"""The pair law of the contact kernel, evaluated from the overlap's edges (``pair_normal``),
-against the earlier evaluation by clipping the overlap polygon (``pair_normal_clip``) on random
+"""The pair law of the contact kernel evaluated from the overlap's edges (``pair_normal_edges``)
+against its evaluation by clipping the overlap polygon (``pair_normal``, the pair loop's) on random
 triangle pairs and on the degenerate pairs of a compressed structured block."""
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ def _both(x, i, j, penalty):
     pool = np.empty((kc.MAX_VERT, kc.N_COL))
     w_new = np.zeros(kc.N_WORK)
     w_old = np.zeros(kc.N_WORK)
-    new = np.array(kc.pair_normal(x, i, j, penalty, w_new, iw, pool))
-    old = np.array(kc.pair_normal_clip(x, i, j, penalty, w_old, iw, pool))
+    new = np.array(kc.pair_normal_edges(x, i, j, penalty, w_new, iw, pool))
+    old = np.array(kc.pair_normal(x, i, j, penalty, w_old, iw, pool))
     return new, w_new, old, w_old
 
 

@@ -54,19 +54,19 @@ Evaluation (all integrals exact)
    with the spring's stored energy, at most ``(mu F_n)^2 / 2k_t``, booked as dissipated). In a
    settled pile more than half the "overlapping" neighbour pairs are such slivers (corners
    and edges that coincide up to round-off).
-2. Edges of the overlap ``D``, without building the polygon: every sum below runs over the
-   edges of ``D``, and each edge of ``D`` is the part of one triangle edge (``c``'s edge ``m``
-   or ``t``'s edge ``j``, oriented counter-clockwise) that lies inside the other triangle,
-   one interval per edge because both are convex. Along an edge the other triangle's
-   barycentrics are affine, and at its two ends they are the separating-axis values already
-   computed (``u`` for ``c``'s corners, ``v`` for ``t``'s), so the interval and the
-   barycentrics at its ends cost a division per crossing (:func:`_edge_part`). A part of
-   ``t``'s edge lying exactly on a line of ``c``'s edge is left to ``c``, so that an edge
-   the two triangles share is counted once; if round-off decides such a line differently
-   on the two sides the parts do not close (gap above ``CLOSE_TOL`` of the perimeter), and
-   that pair is evaluated by clipping instead (:func:`pair_normal_clip`: ``c`` clipped by
-   ``t``'s half-planes, Sutherland-Hodgman on a pool of vertices carrying both triangles'
-   barycentrics, the earlier evaluation, kept as the reference).
+2. Overlap polygon ``D``: ``c`` clipped by the half-planes of ``t`` that cut one of ``c``'s
+   corners off (Sutherland-Hodgman on a pool of vertices referenced by index, so a kept
+   corner costs one index copy). Each corner carries
+   both triangles' barycentrics (interpolated: exact, they are affine); each edge of ``D``
+   carries a *label*, the triangle edge it lies on (``c``'s edge ``m`` or ``t``'s edge ``j``).
+   :func:`pair_normal_edges` evaluates the same law without the polygon: each edge of ``D`` is
+   the part of one triangle edge inside the other triangle (one interval, both being convex),
+   found from the other's barycentrics at the edge's ends, which are the separating-axis
+   values (``u`` for ``c``'s corners, ``v`` for ``t``'s); a part of ``t``'s edge lying on a line
+   of ``c``'s edge is left to ``c``, and pairs whose parts do not close (edges collinear to
+   round-off) fall back to clipping. It agrees with clipping to round-off
+   (``tests/test_contact_kernel.py``) and is 5 % faster on a compressed block, but 10-15 %
+   slower on the slivers of a settled pile (``docs/benchmarks.md``), so the pair loop clips.
 3. Area terms by parts. ``grad phi_q = 3 b_k`` on ``S_k``, ``grad lambda_i = b_i``, so
    ``3 sum_k b_k int_{D cap S_k} lambda_i dA = int_D grad(phi_q) lambda_i dA
    = oint_dD phi_q lambda_i n dGamma - b_i int_D phi_q dA``, and ``phi_q = 0`` on ``q``'s own
@@ -455,8 +455,9 @@ def _forces_from_sums(acc, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, b
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
-def pair_normal(x, i, j, penalty, w, iw, pool):
-    """Distributed-potential normal contact of one triangle pair (the per-pair law).
+def pair_normal_edges(x, i, j, penalty, w, iw, pool):
+    """:func:`pair_normal` evaluated from the overlap's edges, without building the polygon
+    (module docstring, "Evaluation" 2); an independent check of the per-pair law in the tests.
 
     Parameters
     ----------
@@ -467,7 +468,7 @@ def pair_normal(x, i, j, penalty, w, iw, pool):
     penalty : float
         ``p`` [Pa]; ``E = p int_D (phi_c + phi_t) dA``.
     w : (N_WORK,) float64, iw : (N_IWORK,) int64, pool : (MAX_VERT, N_COL) float64
-        Work space (``iw`` and ``pool`` are used only by :func:`pair_normal_clip`). On return
+        Work space (``iw`` and ``pool`` only for the fallback to clipping). On return
         ``w[0:12]`` holds the nodal forces on ``c`` (0:6) and ``t`` (6:12) [N/m] when the
         triangles overlap (it is not written otherwise).
 
@@ -564,9 +565,9 @@ def _overlap_by_clipping(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, 
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
-def pair_normal_clip(x, i, j, penalty, w, iw, pool):
-    """:func:`pair_normal` by clipping (Sutherland-Hodgman), the earlier evaluation, kept as
-    the reference the overlap-edge evaluation is tested against.
+def pair_normal(x, i, j, penalty, w, iw, pool):
+    """Distributed-potential normal contact of one triangle pair (the per-pair law), by clipping
+    (Sutherland-Hodgman). Parameters and returns: see :func:`pair_normal_edges`.
 
     Parameters
     ----------
@@ -597,7 +598,7 @@ def pair_normal_clip(x, i, j, penalty, w, iw, pool):
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
-    """:func:`pair_normal_clip` of a pair that passed the separating-axis test (corners and
+    """:func:`pair_normal` of a pair that passed the separating-axis test (corners and
     the tuple of :func:`_sat`, ``u_ij = 2A_t lambda^t_j(c_i)``): overlap polygon, edge
     integrals, forces."""
     u00, u01, u02, u10, u11, u12, u20, u21, u22 = sat[1:10]
@@ -763,8 +764,8 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
         area = 0.0
         if sat[0]:
             (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
-             bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y,
-                                                            t2x, t2y, sat, penalty, w, iw, pool)
+             bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x,
+                                                                 t1y, t2x, t2y, sat, penalty, w, iw, pool)
         if not area > 0.0:
             if touching[q]:   # it separated: drop its history (untouched pairs have none)
                 touching[q] = 0
