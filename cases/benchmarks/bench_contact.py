@@ -22,7 +22,9 @@ Prints the records and writes ``docs/benchmarks/contact.json``
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import time
 from pathlib import Path
 
 import numba
@@ -50,6 +52,17 @@ def fragmented_block(n: int, penalty: float, inflate: float, rng):
     return topo, cs, np.ascontiguousarray(x), v
 
 
+def cpu_seconds(step, repeats: int) -> float:
+    """Best CPU time (``time.process_time``) of one ``step()`` over ``repeats`` calls."""
+    step()
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        step()
+        best = min(best, time.process_time() - t0)
+    return best
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=300, help="cells per side (2 n^2 triangles)")
@@ -73,20 +86,27 @@ def main(argv=None) -> None:
                 f[:] = 0.0
                 cs.add_forces(x, v, f, 1e-6, 0)
 
+            load = os.getloadavg()[0]
             rate = best_rate(forces, n_pairs, 0.3, args.repeats)
+            extra = {}
+            if threads == 1:   # CPU time per pair: less disturbed by other jobs than wall time
+                extra["ns_per_pair_cpu"] = 1e9 * cpu_seconds(forces, args.repeats) / n_pairs
             records.append(record(f"contact pair forces, fragmented block {label}", rate, "pairs/s",
                                   mesh_size=topo.n_triangles, threads=threads, n_pairs=n_pairs,
-                                  n_overlapping=touching, ms_per_call=1e3 * n_pairs / rate))
+                                  n_overlapping=touching, ms_per_call=1e3 * n_pairs / rate,
+                                  load_avg_1min=[load, os.getloadavg()[0]], **extra))
             if inflate == 0.0:
+                load = os.getloadavg()[0]
                 srate = best_rate(lambda: cs.search(x), topo.n_triangles, 0.3, args.repeats)
                 records.append(record("contact broad phase (grid + incidence), fragmented block", srate,
                                       "triangles/s", mesh_size=topo.n_triangles, threads=threads,
-                                      n_pairs=n_pairs))
+                                      n_pairs=n_pairs, load_avg_1min=[load, os.getloadavg()[0]]))
     numba.set_num_threads(max_threads)
     save("contact", records,
          note="numba threads via numba.set_num_threads; pairs/s = candidate pairs per wall second of "
-              "ContactSet.add_forces (pair law + friction + gather, no re-search); measured on a "
-              "machine shared with other jobs")
+              "ContactSet.add_forces (pair law + friction + gather, no re-search); ns_per_pair_cpu = "
+              "best CPU time (process_time) of one call per pair, 1 thread; load_avg_1min before and after "
+              "each timing; measured on a machine shared with other jobs")
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ Writes docs/benchmarks/fragmented.json.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -93,18 +94,22 @@ def main(argv=None):
                 continue
             numba.set_num_threads(threads)
             searches = contact.n_searches
+            load = os.getloadavg()[0]
             full = best_rate(sim.step, n_tri, seconds, repeats)
             records.append(record("full fragmented step (contact + triangles + integration)", full,
                                   "triangle-steps/s", n_tri, threads, target=5e6,
-                                  searches_during_timing=contact.n_searches - searches, **extra))
+                                  searches_during_timing=contact.n_searches - searches,
+                                  load_avg_1min=[load, os.getloadavg()[0]], **extra))
 
             def contact_pass():
                 contact.add_forces(sim.state.x, sim.state.v, f, sim.dt, sim.state.step)
 
+            load = os.getloadavg()[0]
             rate = best_rate(contact_pass, n_pairs, seconds, repeats)
             records.append(record("contact pair forces (ContactSet.add_forces, no re-search)", rate,
                                   "pairs/s", n_tri, threads, target_2_threads=15e6,
-                                  ms_per_call=1e3 * n_pairs / rate, **extra))
+                                  ms_per_call=1e3 * n_pairs / rate, load_avg_1min=[load, os.getloadavg()[0]],
+                                  **extra))
         numba.set_num_threads(max_threads)
     save("fragmented", records,
          scene="fully fragmented elastic block (every crack element broken), structured mesh, gravity, "
