@@ -289,6 +289,67 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
     counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
     ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
+    Returns ``(overlap?, u00, u01, ..., u22)``.
+    """
+    # differences D_ik = t_k - c_i
+    d00x = t0x - c0x
+    d00y = t0y - c0y
+    d01x = t1x - c0x
+    d01y = t1y - c0y
+    d02x = t2x - c0x
+    d02y = t2y - c0y
+    d10x = t0x - c1x
+    d10y = t0y - c1y
+    d11x = t1x - c1x
+    d11y = t1y - c1y
+    d12x = t2x - c1x
+    d12y = t2y - c1y
+    d20x = t0x - c2x
+    d20y = t0y - c2y
+    d21x = t1x - c2x
+    d21y = t1y - c2y
+    d22x = t2x - c2x
+    d22y = t2y - c2y
+    # 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}
+    u00 = _orient(d01x, d01y, d02x, d02y)
+    u01 = _orient(d02x, d02y, d00x, d00y)
+    u02 = _orient(d00x, d00y, d01x, d01y)
+    u10 = _orient(d11x, d11y, d12x, d12y)
+    u11 = _orient(d12x, d12y, d10x, d10y)
+    u12 = _orient(d10x, d10y, d11x, d11y)
+    u20 = _orient(d21x, d21y, d22x, d22y)
+    u21 = _orient(d22x, d22y, d20x, d20y)
+    u22 = _orient(d20x, d20y, d21x, d21y)
+    # 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}
+    v00 = _orient(d10x, d10y, d20x, d20y)
+    v01 = _orient(d20x, d20y, d00x, d00y)
+    v02 = _orient(d00x, d00y, d10x, d10y)
+    v10 = _orient(d11x, d11y, d21x, d21y)
+    v11 = _orient(d21x, d21y, d01x, d01y)
+    v12 = _orient(d01x, d01y, d11x, d11y)
+    v20 = _orient(d12x, d12y, d22x, d22y)
+    v21 = _orient(d22x, d22y, d02x, d02y)
+    v22 = _orient(d02x, d02y, d12x, d12y)
+    # deepest reach of c past each edge line of t (and of t past c's), against the threshold
+    # TOUCH_EPS 2A (2A_t = u_i0 + u_i1 + u_i2, 2A_c = v_k0 + v_k1 + v_k2 for any i, k)
+    reach_t = min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22)))
+    reach_c = min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22)))
+    hit = reach_t > TOUCH_EPS * (u00 + u01 + u02) and reach_c > TOUCH_EPS * (v00 + v01 + v02)
+    return hit, u00, u01, u02, u10, u11, u12, u20, u21, u22
+
+
+@njit(cache=True, error_model="numpy")
+def _sat_uv(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """:func:`_sat` returning the ``v`` values too (for :func:`pair_normal_edges`; the pair loop
+    keeps the shorter tuple of :func:`_sat`). Separating-axis test of triangles c and t on their six edges, in strict arithmetic (no
+    fast-math, and scalars only, so that it costs no reference counting: corners lying on the
+    other's edge give exact zeros, and touching counts as apart).
+
+    ``u_ij = 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}`` and
+    ``v_kj = 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}`` with ``D_ik = t_k - c_i``; the pair
+    is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
+    counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
+    ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
     Returns ``(overlap?, u00, u01, ..., u22, v00, v01, ..., v22)``.
     """
     # differences D_ik = t_k - c_i
@@ -481,7 +542,7 @@ def pair_normal_edges(x, i, j, penalty, w, iw, pool):
         (``lambda_k = 1/3 + b_k . (x - G)``, for the friction point).
     """
     c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-    sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+    sat = _sat_uv(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
     if not sat[0]:
         return _NONE
     return _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
@@ -491,8 +552,8 @@ def pair_normal_edges(x, i, j, penalty, w, iw, pool):
 def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
     """:func:`pair_normal` of a pair that passed the separating-axis test, from its corners and
     the separating-axis values ``u_ij = 2A_t lambda^t_j(c_i)``, ``v_kj = 2A_c lambda^c_j(t_k)``
-    (``sat``, the tuple of :func:`_sat`): no polygon is built. Every edge of the overlap ``D`` is the part of one
-    triangle edge inside the other triangle (both convex), found from the other's barycentrics
+    (``sat``, the tuple of :func:`_sat_uv`): no polygon is built. Every edge of the overlap
+    ``D`` is the part of one triangle edge inside the other triangle (both convex), found from the other's barycentrics
     at the edge's two ends (linear along it), so the six edge parts are independent; a part of
     ``t``'s edge lying on a line of ``c``'s edge is left to ``c`` (``strict``), so that an edge
     the two triangles share is counted once. Where round-off decides the two sides of such a
@@ -559,9 +620,10 @@ def _overlap(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, pe
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def _overlap_by_clipping(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
-    """:func:`_overlap_clip` as a call of its own (the rare fallback of :func:`_overlap`, kept
-    out of the inlined pair loop)."""
-    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
+    """:func:`_overlap_clip` as a call of its own (the rare fallback of :func:`_overlap`)."""
+    u00, u01, u02, u10, u11, u12, u20, u21, u22 = sat[1:10]
+    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
+                         u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
@@ -590,18 +652,19 @@ def pair_normal(x, i, j, penalty, w, iw, pool):
         (``lambda_k = 1/3 + b_k . (x - G)``, for the friction point).
     """
     c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-    sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
-    if not sat[0]:
+    hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                            t0x, t0y, t1x, t1y, t2x, t2y)
+    if not hit:
         return _NONE
-    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool)
+    return _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
+                         u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool)
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
-def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sat, penalty, w, iw, pool):
-    """:func:`pair_normal` of a pair that passed the separating-axis test (corners and
-    the tuple of :func:`_sat`, ``u_ij = 2A_t lambda^t_j(c_i)``): overlap polygon, edge
-    integrals, forces."""
-    u00, u01, u02, u10, u11, u12, u20, u21, u22 = sat[1:10]
+def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
+                  u00, u01, u02, u10, u11, u12, u20, u21, u22, penalty, w, iw, pool):
+    """:func:`pair_normal` (clipping) of a pair that passed the separating-axis test (corners and
+    ``u_ij = 2A_t lambda^t_j(c_i)`` from :func:`_sat`): overlap polygon, edge integrals, forces."""
     # local frame at c's centroid; barycentric gradients b_k = rot(P_{k+1} - P_{k+2}) / 2A
     ox = (c0x + c1x + c2x) / 3.0
     oy = (c0y + c1y + c2y) / 3.0
@@ -699,8 +762,34 @@ def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, sa
         tyx += sy * mx
         tyy += sy * my
         a = b
-    return _forces_from_sums((area2, mx6, my6, phi_c, phi_t, nx, ny, txx, txy, tyx, tyy), gtx, gty,
-                             bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y, penalty, w)
+    if not area2 > 0.0:
+        return _NONE
+    area = 0.5 * area2
+    # int_D phi dA = area / 3 + 2 sum (fan area x int f ds) over the other's edges
+    ic_ = area / 3.0 + phi_c
+    it_ = area / 3.0 + phi_t
+    p3 = 3.0 * penalty
+    # F_i = 3p (N / 3 + T b_i) - p b_i int_D phi dA on c; on t -N and T_t = -T + N (x) G_t
+    w[0] = penalty * nx + p3 * (txx * bc0x + txy * bc0y) - penalty * bc0x * ic_
+    w[1] = penalty * ny + p3 * (tyx * bc0x + tyy * bc0y) - penalty * bc0y * ic_
+    w[2] = penalty * nx + p3 * (txx * bc1x + txy * bc1y) - penalty * bc1x * ic_
+    w[3] = penalty * ny + p3 * (tyx * bc1x + tyy * bc1y) - penalty * bc1y * ic_
+    w[4] = penalty * nx + p3 * (txx * bc2x + txy * bc2y) - penalty * bc2x * ic_
+    w[5] = penalty * ny + p3 * (tyx * bc2x + tyy * bc2y) - penalty * bc2y * ic_
+    txx = nx * gtx - txx
+    txy = nx * gty - txy
+    tyx = ny * gtx - tyx
+    tyy = ny * gty - tyy
+    w[6] = -penalty * nx + p3 * (txx * bt0x + txy * bt0y) - penalty * bt0x * it_
+    w[7] = -penalty * ny + p3 * (tyx * bt0x + tyy * bt0y) - penalty * bt0y * it_
+    w[8] = -penalty * nx + p3 * (txx * bt1x + txy * bt1y) - penalty * bt1x * it_
+    w[9] = -penalty * ny + p3 * (tyx * bt1x + tyy * bt1y) - penalty * bt1y * it_
+    w[10] = -penalty * nx + p3 * (txx * bt2x + txy * bt2y) - penalty * bt2x * it_
+    w[11] = -penalty * ny + p3 * (tyx * bt2x + tyy * bt2y) - penalty * bt2y * it_
+    e = penalty * (ic_ + it_)
+    gx = mx6 / (3.0 * area2)    # int_D x dA / area = (mx6 / 6) / (area2 / 2)
+    gy = my6 / (3.0 * area2)
+    return (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
 
 
 @njit(cache=True, error_model="numpy")
@@ -760,12 +849,14 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
             s2y = 0.0
         j = pair_j[q]
         c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-        sat = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+        hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                                t0x, t0y, t1x, t1y, t2x, t2y)
         area = 0.0
-        if sat[0]:
+        if hit:
             (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
              bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x,
-                                                                 t1y, t2x, t2y, sat, penalty, w, iw, pool)
+                                                                 t1y, t2x, t2y, u00, u01, u02, u10, u11, u12, u20,
+                                                                 u21, u22, penalty, w, iw, pool)
         if not area > 0.0:
             if touching[q]:   # it separated: drop its history (untouched pairs have none)
                 touching[q] = 0
