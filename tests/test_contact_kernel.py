@@ -53,13 +53,13 @@ def _assert_same(x, i, j, penalty):
 def test_edge_evaluation_matches_clipping_on_random_pairs():
     rng = np.random.default_rng(7)
     n_overlap = 0
-    for _ in range(4000):
+    for _ in range(1500):
         size = rng.uniform(0.2, 1.5)
         x = np.ascontiguousarray(np.vstack([_ccw_triangle(rng, np.zeros(2), 1.0),
                                             _ccw_triangle(rng, 0.8 * rng.normal(size=2), size)]))
         n_overlap += _assert_same(x, 0, 1, 3e10)
         n_overlap += _assert_same(x, 1, 0, 3e10)
-    assert n_overlap > 2500
+    assert n_overlap > 900
 
 
 def test_edge_evaluation_matches_clipping_on_shallow_and_containing_pairs():

@@ -206,7 +206,8 @@ def test_four_slope_joint_offset_places_the_persistent_joints_relative_to_the_to
             dfn = four_slope_model("low", spacing, joint_offset=offset).dfn()
         seg = dfn.segments
         d = seg[:, 1] - seg[:, 0]
-        persistent = np.abs(np.cross(d / np.linalg.norm(d, axis=1, keepdims=True), [np.cos(dip), np.sin(dip)])) < 1e-6
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+        persistent = np.abs(u[:, 0] * np.sin(dip) - u[:, 1] * np.cos(dip)) < 1e-6   # parallel to the dip
         dist = np.abs((seg[persistent, 0] - toe) @ normal)   # distance of each persistent line to the toe
         assert dist.min() == pytest.approx(expect, abs=1e-6), (spacing, offset)
     with pytest.raises(ValueError, match="joint_offset"):
