@@ -104,6 +104,19 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         summary["stages"].append(result.as_dict())
         return result
 
+    try:
+        _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir)
+    except KeyboardInterrupt:
+        # Ctrl-C: the stages so far and the state reached are kept, so the caller can still
+        # write its report and pictures (the solver has written ``interrupted_state.npz``)
+        summary["outcome"] = "interrupted"
+        summary["interrupted_at_s"] = float(sim.state.time)
+    summary["final_reduction"] = cracks.interfaces.reduction
+    summary["n_broken"] = int(cracks.broken.sum())
+    return summary
+
+
+def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir) -> None:
     cracks.hold_elastic(False)
     eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
                                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
@@ -137,6 +150,3 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         record(run_stage(sim, Stage("runout", max_time=cap, damping=NO_DAMPING,
                                     converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio,
                                                          min_time=T, hold_for=T))))
-    summary["final_reduction"] = cracks.interfaces.reduction
-    summary["n_broken"] = int(cracks.broken.sum())
-    return summary
