@@ -27,6 +27,7 @@ reduction in ``[0.5, 2.5]`` to 0.05.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -109,14 +110,14 @@ class PlanarDFNScene:
         """The slope model with the cross joints (joint set 2; none if all were dropped)."""
         from planar_failure import HEIGHT
 
-        from fdem.geometry import Model, SegmentSet
+        from fdem.geometry import Geometry, SegmentSet
         from fdem.scenes import planar_slope_model
 
         base = planar_slope_model(HEIGHT, **GEOMETRY)
         segs = self.cross_joints(dfn_seed, trace_length, dip_scatter, joints)
         sets = (*base.joint_sets, SegmentSet(segs.reshape(-1, 4), name="cross joints")) if len(segs) else \
             base.joint_sets
-        return Model(base.bodies, sets, min_joint_length=0.25 * self.size)
+        return Geometry(base.bodies, sets, min_joint_length=0.25 * self.size)
 
     def __call__(self, cohesion: float, friction_angle: float, dfn_seed: int = 0, trace_length: float = 3.0,
                  dip_scatter: float = 10.0, joints: int = 4):
@@ -142,9 +143,10 @@ PARAMETERS = {
 
 
 def ensemble(n: int = 20, seed: int = 0, method: str = "lhs", size: float = 2.0,
-             fos: tuple = (0.5, 2.5, 0.05)) -> Ensemble:
-    """The ensemble of this case (module docstring)."""
-    return Ensemble(PlanarDFNScene(size=size), PARAMETERS, n=n, seed=seed, method=method, fos=fos, toe_x=3.0)
+             fos: tuple = (0.5, 2.5, 0.05), max_time: float | None = None) -> Ensemble:
+    """The ensemble of this case (module docstring); ``max_time`` [s] caps each trial (smoke run)."""
+    return Ensemble(PlanarDFNScene(size=size), PARAMETERS, n=n, seed=seed, method=method, fos=fos, toe_x=3.0,
+                    max_time=max_time)
 
 
 def main(argv=None) -> dict:
@@ -157,11 +159,21 @@ def main(argv=None) -> dict:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--method", choices=("lhs", "mc"), default="lhs")
     parser.add_argument("--size", type=float, default=2.0, help="mesh size [m]")
+    parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on each trial's simulated time [s] (a smoke run: realizations end below_bracket)")
+    parser.add_argument("--no-pictures", action="store_true", help="no PNG pictures")
     args = parser.parse_args(argv)
-    ens = ensemble(args.n, args.seed, args.method, args.size)
+    if not (math.isfinite(args.size) and args.size > 0):
+        parser.error(f"--size must be a positive number of metres, got {args.size}")
+    try:
+        ens = ensemble(args.n, args.seed, args.method, args.size, max_time=args.max_time)
+    except ValueError as err:
+        parser.error(str(err))
+    if args.no_pictures:
+        ens = dataclasses.replace(ens, pictures=False)
     load = os.getloadavg()
     run = run_ensemble(ens, args.out, workers=args.workers, scheduler=args.scheduler, timeout=args.timeout)
-    summary = summarize(args.out)
+    summary = summarize(args.out, pictures=not args.no_pictures)
     timing = {"workers": args.workers if args.scheduler is None else None, "scheduler": args.scheduler,
               "n": args.n, "n_run": run.n_run, "n_skipped": run.n_skipped, "wall_seconds": run.wall_seconds,
               "load_average_before": load, "load_average_after": os.getloadavg(), "cpu_count": os.cpu_count(),

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fdem.cases.common import set_threads
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
 from fdem.geometry import Geometry, rectangle
@@ -81,19 +82,23 @@ def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float
 
 def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO,
         period: float = PERIOD, t_after: float = 0.5, element_damping: float = DEFAULT_ELEMENT_DAMPING,
-        n_samples: int = 200, penalty: float = CONTACT_PENALTY) -> dict:
+        n_samples: int = 200, penalty: float = CONTACT_PENALTY, max_time: float | None = None) -> dict:
     """Shake the block; return its slip relative to the base against Newmark's, in time and at the end.
 
-    The run lasts until ``t_after`` [s] past the Newmark block's stopping time. ``n_samples``
-    slip samples are recorded along the way.
+    The run lasts until ``t_after`` [s] past the Newmark block's stopping time, or ``max_time``
+    [s] of simulated time if that is shorter (a smoke run: ``time_capped`` is then true and the
+    error compares an unfinished slip). ``n_samples`` slip samples are recorded along the way.
     """
     history = pulse(theta_deg, phi_deg, ratio, period)
     t_nm, d_nm, _ = newmark_response(history.t, history.along((1, 0)), theta_deg, phi_deg, G)
     t_end = float(t_nm[-1]) + t_after
+    capped = max_time is not None and max_time < t_end
+    if capped:
+        t_end = max_time
     model, providers, block, base = build(history, theta_deg, phi_deg, size, element_damping, penalty=penalty)
     sim = Simulation(model, providers=providers, progress=False)
     wall = time.perf_counter()
-    sim.run(t_end=T_SETTLE, history_every=10**9, energy_tolerance=0.05, stage="settle")
+    sim.run(t_end=min(T_SETTLE, t_end), history_every=10**9, energy_tolerance=0.05, stage="settle")
 
     def rel(s):  # mean down-slope displacement of the block minus the base's [m]
         u = s.state.x[:, 0] - s.x0[:, 0]
@@ -118,7 +123,7 @@ def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio
             "balance_error_relative": float(row["balance_error_relative"]),
             "boundary_work_J_per_m": float(row["boundary_work"]), "friction_J_per_m": float(row.get("friction", 0.0)),
             "n_block_triangles": int(len(block) // 3), "dt_s": sim.dt, "steps": sim.state.step, "wall_s": wall,
-            "element_damping": element_damping, "contact_penalty_Pa": penalty,
+            "element_damping": element_damping, "contact_penalty_Pa": penalty, "time_capped": capped,
             "t_s": times.tolist(), "slip_curve_m": slips.tolist(), "newmark_curve_m": d_curve.tolist()}
 
 
@@ -154,12 +159,19 @@ def main(argv=None):
                         help="folder for newmark.json and newmark.png (default docs/verification)")
     parser.add_argument("--size", type=float, nargs="*", default=list(SIZES), help="element sizes [m]")
     parser.add_argument("--no-pictures", action="store_true", help="skip the PNG")
-    parser.add_argument("--max-steps", type=int, default=None, help="unused: each run lasts until the block stops")
+    parser.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
+    parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on each run's simulated time [s] (a smoke run; default: until the block stops)")
     args = parser.parse_args(argv)
+    if any(not (math.isfinite(h) and h > 0) for h in args.size):
+        parser.error(f"--size must be positive numbers of metres, got {args.size}")
+    if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
+        parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    set_threads(args.threads)
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
     for size in args.size:
-        r = run(size)
+        r = run(size, max_time=args.max_time)
         rows.append(r)
         print(f"h = {size:g} m: slip {100 * r['slip_m']:.3f} cm, Newmark {100 * r['newmark_m']:.3f} cm, "
               f"error {100 * r['error']:+.2f} %, ledger {r['balance_error_relative']:.2e}, "
@@ -169,6 +181,7 @@ def main(argv=None):
              "runs": rows}, indent=1))
     if not args.no_pictures:
         plot(rows, args.out / "newmark.png")
+    return {"runs": rows}
 
 
 if __name__ == "__main__":

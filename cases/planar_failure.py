@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fdem.cases.common import set_threads
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
 from fdem.geostatic import geostatic_start
@@ -180,15 +181,30 @@ def trial_stage(sim: Simulation, periods: float = 5.0, unbalanced_ratio: float =
 
 
 def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol: float = 0.01,
-             out_dir: Path | None = None, pictures: bool = False, **fos_options) -> dict:
+             out_dir: Path | None = None, pictures: bool = False, max_time: float | None = None,
+             **fos_options) -> dict:
     """Factor of safety of geometry ``name`` (:data:`GEOMETRIES`) at mesh ``size`` [m] by
-    strength reduction (:func:`fdem.stages.factor_of_safety`), with the analytic value."""
+    strength reduction (:func:`fdem.stages.factor_of_safety`), with the analytic value.
+    ``max_time`` [s]: cap on each trial's simulated time (a smoke run: capped trials count as
+    failing, so its factor of safety means nothing)."""
+    from fdem.cases.common import cap_simulated_time
+
     g = GEOMETRIES[name]
     le = analytic(**g)
     t0 = time.perf_counter()
     scene = planar_failure_simulation(planar_slope_model(HEIGHT, **g), size, out_dir=out_dir, pictures=pictures)
+    cap_simulated_time(scene.sim, max_time)
     t1 = time.perf_counter()
-    result = factor_of_safety(scene.sim, lower, upper, tol=tol, trial=trial_stage(scene.sim), **fos_options)
+    try:
+        result = factor_of_safety(scene.sim, lower, upper, tol=tol, trial=trial_stage(scene.sim), **fos_options)
+    except ValueError as err:
+        if max_time is None:
+            raise
+        # a smoke run: the capped trials cannot converge, so the bracket "fails" at its lower end
+        return {"geometry": name, "size_m": size, "n_triangles": scene.n_triangles, "dt_s": scene.sim.dt,
+                "analytic_fos": le.fos, "fos": None, "bracket": None, "time_capped": True,
+                "capped_trial": str(err), "steps": int(scene.sim.state.step),
+                "seconds_build": t1 - t0, "seconds_fos": time.perf_counter() - t1}
     t2 = time.perf_counter()
     fos = float(result.fos)
     return {
@@ -205,7 +221,7 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
         "failure_surface_tags": {int(k): int(v) for k, v in zip(*np.unique(scene.cracks.tag[result.failure_surface],
                                                                              return_counts=True))},
         "n_broken_first_failure": int(result.failure_broken.size),
-        "seconds_build": t1 - t0, "seconds_fos": t2 - t1,
+        "seconds_build": t1 - t0, "seconds_fos": t2 - t1, "time_capped": max_time is not None,
     }
 
 
@@ -253,24 +269,31 @@ def main(argv=None) -> list:
     parser.add_argument("--upper", type=float, default=2.0, help="reduction factor known to fail")
     parser.add_argument("--tol", type=float, default=0.01, help="bracket width at which the search stops")
     parser.add_argument("--no-pictures", action="store_true", help="skip the FoS-against-mesh figure")
+    parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on each trial's simulated time [s] (a smoke run: its FoS means nothing)")
     args = parser.parse_args(argv)
-    if args.threads is not None:
-        import numba
-
-        numba.set_num_threads(args.threads)
+    if any(not (math.isfinite(h) and h > 0) for h in args.size):
+        parser.error(f"--size must be positive numbers of metres, got {args.size}")
+    if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
+        parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    set_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.geometry:
         for size in args.size:
-            r = run_case(name, size, args.lower, args.upper, args.tol)
+            r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time)
             rows.append(r)
+            (args.out / "planar_failure.json").write_text(json.dumps(rows, indent=1))
+            if r["fos"] is None:
+                print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, trials capped at "
+                      f"{args.max_time:g} s: no factor of safety (smoke run)", flush=True)
+                continue
             print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, FoS {r['fos']:.3f} "
                   f"in [{r['bracket'][0]:.3f}, {r['bracket'][1]:.3f}] against Hoek-Bray {r['analytic_fos']:.3f} "
                   f"({100 * r['error_relative']:+.1f} %), {r['seconds_fos']:.0f} s", flush=True)
-            (args.out / "planar_failure.json").write_text(json.dumps(rows, indent=1))
     print(f"wrote {args.out / 'planar_failure.json'}")
-    if not args.no_pictures:
-        print(f"wrote {plot(rows, args.out / 'planar_failure.png')}")
+    if not args.no_pictures and any(r["fos"] is not None for r in rows):
+        print(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")
     return rows
 
 

@@ -211,6 +211,9 @@ class Ensemble:
         failure, runout to rest), or ``None``
     toe_x : toe abscissa [m] for :func:`fdem.analysis.runout` (default: the scene's ``toe_x``)
     pictures : return the failure picture of each realization (``fos_failure.png``)
+    max_time : cap [s] on each trial's simulated time, or ``None`` (the trial's own cap, 5 T).
+        A smoke setting: a capped trial counts as failing, so realizations end
+        ``below_bracket``; the cap is part of the description, so it never mixes with real runs
     """
 
     scene: Callable
@@ -222,6 +225,7 @@ class Ensemble:
     runout: object = None
     toe_x: float | None = None
     pictures: bool = True
+    max_time: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "parameters", dict(self.parameters))
@@ -243,6 +247,8 @@ class Ensemble:
         lower, upper, tol = self.fos
         if not (_finite(lower) and _finite(upper) and _finite(tol) and 0 < lower < upper and tol > 0):
             raise ValueError(f"ensemble fos bracket must be 0 < lower < upper with tol > 0, got {self.fos!r}")
+        if self.max_time is not None and not (_finite(self.max_time) and self.max_time > 0):
+            raise ValueError(f"ensemble max_time must be a positive number of seconds, got {self.max_time!r}")
 
     def describe(self) -> dict:
         """Everything that decides the results, as JSON-ready data (the hash covers this)."""
@@ -250,7 +256,9 @@ class Ensemble:
         return {"scene": _callable_name(self.scene),
                 "parameters": {k: v.describe() for k, v in sorted(self.parameters.items())},
                 "n": int(self.n), "seed": int(self.seed), "method": self.method, "fos": list(self.fos),
-                "runout": None if wf is None else repr(wf), "toe_x": self.toe_x}
+                "runout": None if wf is None else repr(wf), "toe_x": self.toe_x,
+                # only when set, so the fingerprints of existing uncapped ensembles stay the same
+                **({"max_time": float(self.max_time)} if self.max_time is not None else {})}
 
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`describe` (canonical JSON)."""
@@ -321,7 +329,7 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         if numba.get_num_threads() > want:
             numba.set_num_threads(want)
         row["numba_threads"] = numba.get_num_threads()
-        from .stages import factor_of_safety
+        from .stages import default_trial_stage, factor_of_safety
 
         built = ensemble.scene(**params)
         sim = getattr(built, "sim", built)
@@ -331,7 +339,12 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         lower, upper, tol = ensemble.fos
         try:
             with tempfile.TemporaryDirectory() as tmp:
-                res = factor_of_safety(sim, lower, upper, tol=tol, out_dir=tmp if ensemble.pictures else None)
+                trial = None
+                if ensemble.max_time is not None:
+                    trial = default_trial_stage(sim)
+                    trial = dataclasses.replace(trial, max_time=min(trial.max_time, ensemble.max_time))
+                res = factor_of_safety(sim, lower, upper, tol=tol, trial=trial,
+                                       out_dir=tmp if ensemble.pictures else None)
                 png = Path(tmp) / "fos_failure.png"
                 if png.exists():
                     picture = png.read_bytes()
