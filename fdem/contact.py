@@ -23,8 +23,9 @@ Narrow phase and friction
 Distributed-potential penalty (Munjiza & Andrews 2000; Munjiza 2004 ch. 3): see
 :mod:`fdem.kernels.contact`. Friction is a tangential penalty per pair, capped by Coulomb
 ``mu |F_n|`` (incremental, return mapping), acting at the centroid of the overlap on both
-triangles (equal and opposite, at the same point: no spurious torque). Its stiffness is a
-fraction of the pair's current secant normal stiffness. The tangential force (the slip history)
+triangles (equal and opposite, at the same point: no spurious torque). Its stiffness is constant
+per pair, ``k_t = tangential_ratio * 6 p L / h`` of the smaller of the two triangles (see
+:class:`ContactSet`). The tangential force (the slip history)
 is kept per pair across steps and across re-searches (keyed by the triangle pair) and dropped
 when the pair separates. Optional normal viscous damping ``c_n = 2 xi sqrt(k m_eff)`` with the
 pair's current secant stiffness ``k = F_n^2 / (2 E_pair)`` and ``m_eff`` the reduced mass of the
@@ -37,7 +38,8 @@ Use
     topo = build_topology(mesh)
     contact = ContactSet(topo, penalty=50 * E, friction_angle=35.0, mass=nodal_mass,
                          damping_ratio=0.0)
-    dt = safety * min(dt_elements, dt_cracks, contact.stable_dt(nodal_mass))
+    # the solver combines the limits as 1 / sqrt(sum 1/dt_i^2), times its safety factor
+    dt = safety * (dt_elements**-2 + dt_cracks**-2 + contact.stable_dt(nodal_mass)**-2) ** -0.5
     # each step (forces ON nodes, added into f):
     contact.add_forces(x, v, f, dt, step)
     # when crack elements break:

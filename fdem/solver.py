@@ -637,13 +637,17 @@ class Simulation:
 
     def crack_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:
         """Line-cell points (2 per crack element, midpoints of its coincident node pairs), mean
-        normal opening and slip [m] of every crack element (see :mod:`fdem.topology` for the order)."""
+        normal opening and slip [m] of every crack element (see :mod:`fdem.topology` for the order).
+
+        The frame is the crack law's: the tangent of the mid-line ``t = (m1 - m0)/|m1 - m0|``
+        with ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``. These are the geometric opening and slip
+        of the element; the law also subtracts the preload offsets of a static start."""
         state = state or self.state
         cn = self.model.topology.crack_nodes
         x = state.x
         a = 0.5 * (x[cn[:, 0]] + x[cn[:, 3]])
         b = 0.5 * (x[cn[:, 1]] + x[cn[:, 2]])
-        t = x[cn[:, 1]] - x[cn[:, 0]]
+        t = b - a
         t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
         n = np.column_stack([t[:, 1], -t[:, 0]])
         gap = 0.5 * ((x[cn[:, 3]] - x[cn[:, 0]]) + (x[cn[:, 2]] - x[cn[:, 1]]))

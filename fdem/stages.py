@@ -18,8 +18,8 @@ Every stage reports why it ended (:class:`StageResult`): ``converged``, ``failed
 Time scales come from the model (:func:`response_time`): the fundamental period of a
 slope of height ``H`` (shear beam on a rigid base) is ``T = 4 H / c_s`` with
 ``c_s = sqrt(mu / rho)`` (Kramer 1996, *Geotechnical Earthquake Engineering*, sec. 7.2); a
-15-30 m slope rings for about 0.3 s. Checks run every ``T / 40``; a factor-of-safety trial
-is capped at ``10 T`` by default.
+15-30 m slope rings for about 0.3 s. Checks run every ``T / 40``; a stage with rules is
+capped at ``10 T`` by default, a factor-of-safety trial at ``5 T`` (:func:`default_trial_stage`).
 
 Factor of safety (:func:`factor_of_safety`): from a state in equilibrium, each trial sets a
 factor ``F`` of a trigger (strength reduction: ``c / F``, ``tan(phi) / F`` everywhere, see

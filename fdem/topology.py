@@ -12,8 +12,10 @@ counter-clockwise (so B traverses it ``q -> p``), the element's nodes are::
     crack_nodes[c] = [A_p, A_q, B_q, B_p]
 
 Nodes 0 and 3 coincide in the reference state, and so do nodes 1 and 2. The unit tangent is
-``t = (x1 - x0)/|x1 - x0|`` and the normal ``n = (t_y, -t_x)`` points out of A into B, so the
-opening at end 0 is ``(x3 - x0) . n`` and the slip ``(x3 - x0) . t``.
+that of the element's mid-line, ``t = (m1 - m0)/|m1 - m0|`` with ``m0 = (x0 + x3)/2`` and
+``m1 = (x1 + x2)/2`` (``(x1 - x0)/|x1 - x0|`` in the reference state), and the normal
+``n = (t_y, -t_x)`` points out of A into B, so the opening at end 0 is ``(x3 - x0) . n`` and the
+slip ``(x3 - x0) . t``.
 """
 from __future__ import annotations
 
