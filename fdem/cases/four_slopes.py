@@ -40,13 +40,15 @@ GRAVITY = 9.81
 SIZE = 0.5
 
 
-def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None):
-    """Geometry, mesh and topology of one of the four slopes."""
+def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
+          joint_offset: float | None = None):
+    """Geometry, mesh and topology of one of the four slopes (``joint_offset``: where the
+    persistent joints sit relative to the toe, :func:`fdem.scenes.four_slope_model`)."""
     from fdem.meshing import mesh_model
     from fdem.scenes import four_slope_model
     from fdem.topology import build_topology
 
-    geometry = four_slope_model(angle, spacing)
+    geometry = four_slope_model(angle, spacing, joint_offset=joint_offset)
     mesh = mesh_model(geometry, size, refine_near_joints=refine)
     return geometry, mesh, build_topology(mesh)
 
@@ -99,6 +101,9 @@ def main(argv=None) -> dict:
                          size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
     parser.add_argument("--angle", choices=["low", "high"], default="low")
     parser.add_argument("--spacing", default="fine", help="'fine' (s = 1 m), 'coarse' (s = 5 m) or metres")
+    parser.add_argument("--joint-offset", type=float, default=None, metavar="FRACTION",
+                        help="persistent joints relative to the toe, a fraction of the spacing: 0 puts one "
+                             "through the toe, 0.5 the toe midway (default: 0 fine, 0.5 coarse)")
     parser.add_argument("--refine", type=float, default=None, help="element size factor on joints, e.g. 0.5")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
@@ -125,7 +130,7 @@ def main(argv=None) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine)
+            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine, args.joint_offset)
         except ValueError as err:  # bad input: say what is wrong, no traceback
             parser.error(str(err))
     for w in caught:
@@ -145,7 +150,8 @@ def main(argv=None) -> dict:
         written.append(plot_mesh_png(topo, out / f"{name}_mesh.png",
                                      title=f"{args.angle}-angle {args.spacing} slope: {topo.n_triangles} triangles"))
     print("wrote " + ", ".join(map(str, written)))
-    summary = {"case": NAME, "scene": name, "size_m": args.size, "n_triangles": topo.n_triangles,
+    summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": (args.joint_offset if args.joint_offset is not None
+                                                                      else 0.5 if spacing == "coarse" else 0.0), "n_triangles": topo.n_triangles,
                "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
                "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
 
