@@ -643,7 +643,10 @@ def summarize(out, pictures: bool = True, confidence: float = 0.95) -> dict:
     }
     if pictures:
         summary["pictures"] = _plots(out, rows, ok, fos, varied, spearman, summary, run_d, run_v)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    from .report import _jsonable
+
+    # undefined statistics (no realization with a FoS, an infinite upper bound) are JSON null
+    (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1, allow_nan=False))
     return summary
 
 
