@@ -14,7 +14,8 @@ Composed of :mod:`fdem.stages` so that a case script only builds the model and c
    falls by 5 per second, undamped).
 4. **Runout** at the factor where the slope failed: dynamic (no quasi-static damping), until
    the kinetic energy falls below a fraction of its peak and stays there for one response
-   time, capped in simulated time.
+   time, capped in simulated time. With ``out_dir`` the state it starts from is saved to
+   ``runout_start.npz`` (:func:`fdem.checkpoint.load_checkpoint` restarts from it).
 
 Every stage's result (why it ended, when, how many steps) goes into the returned summary.
 """
@@ -146,6 +147,14 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             summary["failed_at_factor"] = F_end
         summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
     if summary["outcome"] == "failed":
+        if out_dir is not None:
+            # the failed state before the runout: rerun the runout from it with other settings
+            # (a longer cap, a smaller step), or profile it (cases/benchmarks/profile_scene.py)
+            from pathlib import Path
+
+            from .checkpoint import save_checkpoint
+
+            summary["runout_checkpoint"] = str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
         cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
         record(run_stage(sim, Stage("runout", max_time=cap, damping=NO_DAMPING,
                                     converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio,

@@ -26,6 +26,11 @@ wrapped with timers (the solver is not changed); a step's time splits into
 * ``output``: output frames, provider energy terms and ledger rows;
 * ``python``: everything else (the step and stage loops, rule checks, state copies).
 
+``--from-checkpoint runs/low_fine/runout_start.npz`` (with the ``--angle``, ``--spacing``
+and ``--size`` of that run) profiles the real failing phase instead: after the intact stage,
+the scene loads the state a four-slope run failed in and runs ``--steps`` dynamic steps from
+it, booked ``failing`` (elements broken) or ``runout``.
+
 Prints a table (milliseconds per step and the cost of a step relative to an intact step) and
 writes ``docs/benchmarks/profile.json``. ``--contact-softening all`` profiles the earlier
 behaviour (every triangle of a softening element a contactor, searched against every other).
@@ -209,11 +214,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--fail-steps", type=int, default=3000, help="steps of the failing stage (elements must break)")
     ap.add_argument("--contact-softening", choices=["vertex", "all"], default=None,
                     help="contact of softening elements (default: the ContactSet default)")
+    ap.add_argument("--angle", choices=["low", "high"], default="low")
+    ap.add_argument("--spacing", choices=["fine", "coarse"], default="fine")
+    ap.add_argument("--from-checkpoint", type=Path, default=None,
+                    help="after the intact stage, profile --steps dynamic steps from this state of a four-slope run")
     ap.add_argument("--label", default="", help="label of the records (e.g. before / after)")
     ap.add_argument("--no-save", action="store_true")
     args = ap.parse_args(argv)
 
-    geometry, _, topo = four_slopes.build("low", "fine", args.size)
+    geometry, _, topo = four_slopes.build(args.angle, args.spacing, args.size)
     out = Path(tempfile.mkdtemp(prefix="fdem_profile_"))
     sim, cracks = four_slopes.simulation(geometry, topo, out, pictures=False, progress=False)
     contact = sim.providers[1]
@@ -237,9 +246,15 @@ def main(argv=None) -> dict:
               Stage("softening", duration=length, reduction=args.soften, hold_elastic=False, damping=damped),
               Stage("failing", duration=args.fail_steps * sim.dt, reduction=args.fail, damping=damped),
               Stage("runout", duration=length, damping=NO_DAMPING)]
+    if args.from_checkpoint is not None:
+        stages = [stages[0], Stage("from_checkpoint", duration=length, damping=NO_DAMPING)]
     wall = time.perf_counter()
     results = []
     for st in stages:
+        if st.name == "from_checkpoint":
+            from fdem.checkpoint import load_checkpoint
+
+            load_checkpoint(sim, args.from_checkpoint)   # the reduction factor comes with it
         prof.runout = st.name == "runout"
         r = run_stage(sim, st)
         prof.stop()

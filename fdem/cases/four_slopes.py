@@ -9,7 +9,9 @@ Writes to ``--out``: the mesh (``.msh``, a PNG and a ``.vtu`` with crack element
 and monitors per stage), ``summary.json`` (every stage and why it ended, the factor of safety
 when searched, runout distance and volume, displacement percentiles, kinetic energy, cracks by
 mode, fragments, events: :class:`fdem.report.RunReport`), ``events.csv`` and the pictures
-``failure.png``, ``kinetic_energy.png``, ``cracks_by_mode.png`` (plus a PNG per output frame).
+``failure.png``, ``kinetic_energy.png``, ``cracks_by_mode.png`` (plus a PNG per output frame),
+and checkpoints ``runout_start.npz`` (the failed state the runout starts from) and
+``final_state.npz`` (:func:`fdem.checkpoint.load_checkpoint`).
 
     fdem run four-slopes --out runs/low_fine                           # the workflow at size 0.5
     fdem run four-slopes --angle high --spacing coarse --size 0.3 --out runs/high_coarse
@@ -121,6 +123,7 @@ def main(argv=None) -> dict:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
 
     from fdem.analysis import slope_toe
+    from fdem.checkpoint import save_checkpoint
     from fdem.meshing import quality_report
     from fdem.preview import plot_mesh_png, write_mesh_vtu
     from fdem.report import RunReport
@@ -167,6 +170,7 @@ def main(argv=None) -> dict:
                                  runout_time=args.runout_time)
         try:
             result = run_slope_workflow(sim, workflow, out_dir=out)
+            save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
         finally:
             sim.close()
         result.pop("_fos_result", None)
