@@ -44,10 +44,13 @@ class RunReport:
         strength of the crack property sets, the traction a breaking element releases)
     fragments_every : monitor the fragment count on every history row (connected components
         of the still-bonded triangles; about 50 ms at 1e5 triangles)
+    reference_events : magnitude statistics of a reference catalogue to compare with
+        (e.g. :data:`fdem.events.MULIASHI` for that scene), or ``None``: no comparison
     """
 
     def __init__(self, sim: Simulation, toe_x: float, toward: float = -1.0, floor_y: float | None = None,
-                 threshold: float = 0.1, stress_drop: float | None = None, fragments_every: bool = True):
+                 threshold: float = 0.1, stress_drop: float | None = None, fragments_every: bool = True,
+                 reference_events: dict | None = None):
         self.sim = sim
         self.cracks = crack_set_of(sim)
         if self.cracks is None:
@@ -56,6 +59,7 @@ class RunReport:
             raise ValueError(f"toe_x must be finite, got {toe_x}")
         self.toe_x, self.toward, self.threshold = float(toe_x), float(toward), float(threshold)
         self.floor_y = floor_y
+        self.reference_events = reference_events
         if stress_drop is None:
             stress_drop = float(np.mean([p.f_t for p in self.cracks.property_sets.values()]))
         self.stress_drop = float(stress_drop)
@@ -108,7 +112,9 @@ class RunReport:
                        "by_mode": {m: int((modes == m).sum()) for m in ("I", "II", "mixed")}},
             "fragments": {k: frag[k] for k in ("n_fragments", "n_single_triangles", "n_blocks", "largest_share")},
             "events": cat.summary() if not cat.empty else {"n_events": 0, "note": "no events: nothing broke"},
-            "magnitudes": (events.compare_with_reference(mags) if mags.size >= 2 else None),
+            "magnitudes": (None if mags.size < 2 else events.magnitude_statistics(mags)
+                           if self.reference_events is None
+                           else events.compare_with_reference(mags, self.reference_events)),
             "ledger_error_relative": float(hist[-1]["balance_error_relative"]) if hist else 0.0,
         }
         if extra:
@@ -140,7 +146,7 @@ class RunReport:
         cat = cat if cat is not None else self.catalogue()
         if not cat.empty and len(cat.events) >= 2:
             written.append(pictures.magnitude_plot(out / "magnitudes.png", cat.magnitudes,
-                                                   reference=events.MULIASHI))
+                                                   reference=self.reference_events))
         frag = analysis.fragment_statistics(topo, cracks.broken)
         if len(frag["areas"]):
             written.append(pictures.fragment_size_plot(out / "fragments.png", frag["areas"]))

@@ -124,7 +124,9 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
           f"({int((topo.crack_tag > 0).sum())} on joints), dt {sim.dt:.3g} s, "
           f"{len(geo.over_strength['shear']) + len(geo.over_strength['tensile'])} elements over strength at k = 1")
     toe_x, floor_y = slope_toe(geometry.bodies[0])
-    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y)
+    from fdem.events import MULIASHI
+
+    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
     T = response_time(sim.model)
     if args.gravity_factor is None:
         fos = factor_of_safety(sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(),
