@@ -117,11 +117,21 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     return summary
 
 
+def _time_cap_reached(sim) -> bool:
+    """True when a cap on the whole run's simulated time (``sim.time_cap``, set by a case's
+    ``--max-time``) has been reached: a stage that ended there says nothing about stability."""
+    cap = getattr(sim, "time_cap", None)
+    return cap is not None and sim.state.time >= cap - 0.5 * sim.dt
+
+
 def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir) -> None:
     cracks.hold_elastic(False)
     eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
                                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
     summary["equilibrium"] = eq.reason
+    if eq.reason != "converged" and _time_cap_reached(sim):
+        summary["outcome"] = "time_capped"
+        return
     if eq.reason != "converged":
         summary["outcome"] = "failed"
         summary["failed_at_factor"] = 1.0
@@ -137,6 +147,9 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                                                 damping=damped, fail=fail,
                                                 converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio))))
                 if r.reason != "converged":
+                    if _time_cap_reached(sim):
+                        summary["outcome"] = "time_capped"
+                        return
                     summary["failed_at_factor"] = F
                     break
         else:

@@ -19,7 +19,15 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["case_parser", "set_threads", "cap_simulated_time", "time_capped"]
+__all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped"]
+
+SMALL_MESH_TRIANGLES = 20_000
+"""Below this many triangles a case runs on one Numba thread unless ``--threads`` (or
+``NUMBA_NUM_THREADS``) says otherwise: a step of a small mesh lasts well under a millisecond,
+the fork-join of each parallel kernel is a large part of it, and when another process shares
+the cores the threads' spin-waiting collapses it (quick-start scene, 1,503 triangles, load
+average 3 on 2 cores: 8.2 ms per damped step on 2 threads against 0.5-0.7 ms on 1;
+``docs/benchmarks.md``)."""
 
 
 def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
@@ -60,6 +68,17 @@ def set_threads(n: int | None) -> None:
     import numba
 
     numba.set_num_threads(min(int(n), numba.config.NUMBA_NUM_THREADS))
+
+
+def threads_for_mesh(requested: int | None, n_triangles: int) -> int:
+    """Numba threads for a case's mesh: ``requested`` (``--threads``) or ``NUMBA_NUM_THREADS``
+    when given, else one thread below :data:`SMALL_MESH_TRIANGLES` triangles and all cores
+    above. Returns the number of threads the kernels will use."""
+    import numba
+
+    if requested is None and "NUMBA_NUM_THREADS" not in os.environ and n_triangles < SMALL_MESH_TRIANGLES:
+        numba.set_num_threads(1)
+    return numba.get_num_threads()
 
 
 def cap_simulated_time(sim, t_max: float | None) -> None:

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, time_capped
+from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
 
 NAME = "four-slopes"
 # Table 1 of the paper (cases.md A): finite elements
@@ -139,9 +139,10 @@ def main(argv=None) -> dict:
     for w in caught:
         print(f"warning: {w.message}")
     elapsed = time.perf_counter() - t0
+    threads = threads_for_mesh(args.threads, topo.n_triangles)
     report = quality_report(mesh)
     print(f"meshed and exploded in {elapsed:.2f} s: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
-          f"({int((topo.crack_tag > 0).sum())} on joints)")
+          f"({int((topo.crack_tag > 0).sum())} on joints); {threads} thread(s)")
     print(report)
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -153,9 +154,9 @@ def main(argv=None) -> dict:
         written.append(plot_mesh_png(topo, out / f"{name}_mesh.png",
                                      title=f"{args.angle}-angle {args.spacing} slope: {topo.n_triangles} triangles"))
     print("wrote " + ", ".join(map(str, written)))
-    summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": (args.joint_offset if args.joint_offset is not None
-                                                                      else 0.5 if spacing == "coarse" else 0.0), "n_triangles": topo.n_triangles,
-               "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
+    joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
+    summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset,
+               "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
                "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
 
     if args.max_steps != 0:

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, time_capped
+from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
 
 YOUNG, POISSON, DENSITY, UCS = 5.96e9, 0.15, 2560.0, 34.5e6
 JOINT_COHESION, JOINT_FRICTION = 149.33e3, 12.35
@@ -120,8 +120,9 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
     cap_simulated_time(sim, args.max_time)
     topo = sim.model.topology
+    threads = threads_for_mesh(args.threads, topo.n_triangles)
     print(f"[{spacing_rule}] {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
-          f"({int((topo.crack_tag > 0).sum())} on joints), dt {sim.dt:.3g} s, "
+          f"({int((topo.crack_tag > 0).sum())} on joints), dt {sim.dt:.3g} s, {threads} thread(s), "
           f"{len(geo.over_strength['shear']) + len(geo.over_strength['tensile'])} elements over strength at k = 1")
     toe_x, floor_y = slope_toe(geometry.bodies[0])
     from fdem.events import MULIASHI

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, time_capped
+from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
 
 NAME = "quick-start"
 HEIGHT, FACE_ANGLE = 10.0, 60.0                 # slope height [m], face angle [deg]
@@ -125,14 +125,15 @@ def main(argv=None) -> dict:
     toe_x, toe_y = slope_toe(geo.bodies[0])
     report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
     cap_simulated_time(sim, args.max_time)
+    threads = threads_for_mesh(args.threads, sim.model.topology.n_triangles)
     print(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
-          f"time step {sim.dt:.3g} s")
+          f"time step {sim.dt:.3g} s, {threads} thread(s)")
     try:
         result = run_slope_workflow(sim, SlopeWorkflow(fos=FOS_BRACKET if args.fos else None), out_dir=out)
     finally:
         sim.close()
     result.pop("_fos_result", None)
-    extra = {"case": NAME, "size_m": args.size, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
+    extra = {"case": NAME, "size_m": args.size, "threads": threads, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
              "geostatic_seconds": start.seconds, "workflow": result,
              "failed_at_factor": result["failed_at_factor"], "outcome": result["outcome"],
              **factor_of_safety_figures(result), "wall_seconds": time.perf_counter() - wall}
