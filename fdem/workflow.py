@@ -30,7 +30,7 @@ from .solver import NO_DAMPING, Simulation
 from .stages import (Convergence, Failure, Stage, crack_set_of, factor_of_safety, fundamental_damping,
                      response_time, run_stage)
 
-__all__ = ["SlopeWorkflow", "run_slope_workflow", "reduction_steps"]
+__all__ = ["SlopeWorkflow", "run_slope_workflow", "reduction_steps", "factor_of_safety_figures"]
 
 
 def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[float, ...]:
@@ -172,3 +172,20 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         record(run_stage(sim, Stage("runout", max_time=cap, damping=NO_DAMPING,
                                     converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio,
                                                          min_time=T, hold_for=T))))
+
+
+def factor_of_safety_figures(result: dict) -> dict:
+    """``fos``, ``fos_bracket`` and ``fos_method`` from a workflow summary: the bisection's when
+    it searched, else the bracket of the reduction steps, ``[largest factor at which the slope
+    converged, factor at which it failed]``, with ``fos`` its middle (``None`` if it never failed)."""
+    if result.get("fos"):
+        return {"fos": result["fos"]["fos"], "fos_bracket": result["fos"]["bracket"], "fos_method": "bisection"}
+    stable = [st["reduction"] for st in result["stages"]
+              if st["name"].startswith("reduction") or st["name"] == "equilibrium"
+              if st["reason"] == "converged"]
+    failing = result.get("failed_at_factor")
+    if failing is None or not stable:
+        return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],
+                "fos_method": "reduction steps"}
+    lo = max(stable)
+    return {"fos": 0.5 * (lo + failing), "fos_bracket": [lo, failing], "fos_method": "reduction steps"}

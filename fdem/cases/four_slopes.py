@@ -127,7 +127,7 @@ def main(argv=None) -> dict:
     from fdem.meshing import quality_report
     from fdem.preview import plot_mesh_png, write_mesh_vtu
     from fdem.report import RunReport
-    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+    from fdem.workflow import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -177,7 +177,7 @@ def main(argv=None) -> dict:
         result.pop("_fos_result", None)
         summary.update({"workflow": result, "outcome": result["outcome"],
                         "failed_at_factor": result["failed_at_factor"],
-                        "fos": result["fos"]["fos"] if result.get("fos") else None,
+                        **factor_of_safety_figures(result),
                         "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
                         "seconds_simulation": time.perf_counter() - t1})
         summary = run_report.write(out, extra=summary, pictures_on=not args.no_pictures)
@@ -186,7 +186,8 @@ def main(argv=None) -> dict:
                   f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")
         print(f"outcome: {summary['outcome']}"
               + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
-              + (f"; factor of safety {summary['fos']:.3f}" if summary.get("fos") else ""))
+              + (f"; factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "
+                 f"{summary['fos_bracket'][1]:.3f}, {summary['fos_method']})" if summary.get("fos") else ""))
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")

@@ -116,7 +116,7 @@ def main(argv=None) -> dict:
 
     from fdem.analysis import slope_toe
     from fdem.report import RunReport
-    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+    from fdem.workflow import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     wall = time.perf_counter()
     out = args.out
@@ -150,23 +150,6 @@ def main(argv=None) -> dict:
           f"{summary['wall_seconds']:.0f} s")
     print(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}" + ("" if args.no_pictures else f", {out / 'failure.png'}"))
     return summary
-
-
-def factor_of_safety_figures(result: dict) -> dict:
-    """``fos``, ``fos_bracket`` and ``fos_method`` from a workflow summary: the bisection's when
-    it searched, else the bracket of the reduction steps, ``[largest factor at which the slope
-    converged, factor at which it failed]``, with ``fos`` its middle (``None`` if it never failed)."""
-    if result.get("fos"):
-        return {"fos": result["fos"]["fos"], "fos_bracket": result["fos"]["bracket"], "fos_method": "bisection"}
-    stable = [st["reduction"] for st in result["stages"]
-              if st["name"].startswith("reduction") or st["name"] == "equilibrium"
-              if st["reason"] == "converged"]
-    failing = result.get("failed_at_factor")
-    if failing is None or not stable:
-        return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],
-                "fos_method": "reduction steps"}
-    lo = max(stable)
-    return {"fos": 0.5 * (lo + failing), "fos_bracket": [lo, failing], "fos_method": "reduction steps"}
 
 
 def _fmt(v) -> str:
