@@ -269,9 +269,12 @@ def magnitude_plot(path: str | os.PathLike, magnitudes: np.ndarray, dm: float = 
 
 
 def fragment_size_plot(path: str | os.PathLike, areas: np.ndarray, bins_per_decade: int = 4,
-                       title: str = "", dpi: int = 130) -> Path:
+                       title: str = "", dpi: int = 130, time: np.ndarray | None = None,
+                       count: np.ndarray | None = None, stage=None) -> Path:
     """Number of fragments per log-spaced area bin (``bins_per_decade`` per factor of 10) of the
-    fragment areas [m^2 per metre] (``fragment_statistics(...)["areas"]``), log-log axes."""
+    fragment areas [m^2 per metre] (``fragment_statistics(...)["areas"]``), log-log axes; with
+    ``time`` [s] and ``count`` (the ``fragments`` monitor of the history), a left panel shows
+    the number of fragments against time, with the stages marked."""
     a = np.asarray(areas, float).ravel()
     if a.size == 0 or np.any(a <= 0):
         raise ValueError("fragment areas must be a non-empty array of positive values [m^2]")
@@ -279,8 +282,21 @@ def fragment_size_plot(path: str | os.PathLike, areas: np.ndarray, bins_per_deca
     hi = np.ceil(np.log10(a.max()) * bins_per_decade)
     edges = 10.0 ** (np.arange(lo, max(hi, lo + 1) + 1) / bins_per_decade)
     counts, _ = np.histogram(a, bins=edges)
-    fig = _figure((7.0, 4.2))
-    ax = fig.add_subplot(111)
+    over_time = time is not None and count is not None and len(time) > 1
+    fig = _figure((12.0, 4.2) if over_time else (7.0, 4.2))
+    if over_time:
+        n = _same_length(time=np.asarray(time), count=np.asarray(count))
+        ax0 = fig.add_subplot(121)
+        ax0.step(np.asarray(time, float)[:n], np.asarray(count, float)[:n], where="post", color="C2")
+        if stage is not None:
+            _stage_marks(ax0, np.asarray(time, float)[:n], stage)
+        ax0.set_xlabel("time [s]")
+        ax0.set_ylabel("number of fragments")
+        ax0.set_title("fragments over time")
+        ax0.grid(alpha=0.3)
+        ax = fig.add_subplot(122)
+    else:
+        ax = fig.add_subplot(111)
     ax.bar(edges[:-1], counts, width=np.diff(edges), align="edge", color="C2", edgecolor="k", lw=0.4)
     ax.set_xscale("log")
     if counts.max() > 10:

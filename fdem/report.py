@@ -149,7 +149,10 @@ class RunReport:
                                                    reference=self.reference_events))
         frag = analysis.fragment_statistics(topo, cracks.broken)
         if len(frag["areas"]):
-            written.append(pictures.fragment_size_plot(out / "fragments.png", frag["areas"]))
+            t_f, n_f = (analysis.history_columns(sim.history, "time", "fragments")
+                        if sim.history and "fragments" in sim.history[0] else (None, None))
+            written.append(pictures.fragment_size_plot(out / "fragments.png", frag["areas"], time=t_f, count=n_f,
+                                                       stage=stage if t.size else None))
         g = sim.crack_geometry()
         disp = np.linalg.norm(sim.state.x - sim.x0, axis=1)
         written.append(pictures.failure_frame(out / "failure.png", sim.state.x, topo.triangles, disp, g["points"],
