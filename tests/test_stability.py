@@ -16,7 +16,7 @@ import pytest
 
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
-from fdem.geometry import Model as Geometry, rectangle
+from fdem.geometry import Geometry, rectangle
 from fdem.geostatic import geostatic_start
 from fdem.materials import ElasticMaterial
 from fdem.mesh import Mesh, jittered_rectangle, structured_rectangle

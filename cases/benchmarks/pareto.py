@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 
 from fdem.cohesive import CrackProperties, CrackSet, four_slope_property_sets  # noqa: E402
 from fdem.contact import ContactSet  # noqa: E402
-from fdem.geometry import Model as Geometry, SegmentSet, rectangle  # noqa: E402
+from fdem.geometry import Geometry, SegmentSet, rectangle  # noqa: E402
 from fdem.materials import ElasticMaterial  # noqa: E402
 from fdem.mesh import jittered_rectangle, structured_rectangle  # noqa: E402
 from fdem.meshing import mesh_model  # noqa: E402
