@@ -43,7 +43,7 @@ PENALTY = 1 * YOUNG                             # p_n = p_t = contact penalty [P
 GRAVITY = 9.81
 ELEMENT_DAMPING = 0.1                           # of critical, each triangle (docs/damping.md default)
 CONTACT_DAMPING = 0.2                           # normal contact damping ratio: impacts lose energy
-SIZE = 0.8                                      # default element size [m]
+SIZE = 1.0                                      # default element size [m]: the demo runs in < 2 min cold
 MIN_JOINT_LENGTH = 0.3                          # joint pieces shorter than this are dropped [m]
 FOS_BRACKET = (1.0, 2.0, 0.05)                  # (stable, failing, tolerance) of the FoS search
 
