@@ -216,13 +216,14 @@ def main(argv=None) -> dict:
                     help="contact of softening elements (default: the ContactSet default)")
     ap.add_argument("--angle", choices=["low", "high"], default="low")
     ap.add_argument("--spacing", choices=["fine", "coarse"], default="fine")
+    ap.add_argument("--joint-offset", type=float, default=None, help="as the four-slopes case's --joint-offset")
     ap.add_argument("--from-checkpoint", type=Path, default=None,
                     help="after the intact stage, profile --steps dynamic steps from this state of a four-slope run")
     ap.add_argument("--label", default="", help="label of the records (e.g. before / after)")
     ap.add_argument("--no-save", action="store_true")
     args = ap.parse_args(argv)
 
-    geometry, _, topo = four_slopes.build(args.angle, args.spacing, args.size)
+    geometry, _, topo = four_slopes.build(args.angle, args.spacing, args.size, joint_offset=args.joint_offset)
     out = Path(tempfile.mkdtemp(prefix="fdem_profile_"))
     sim, cracks = four_slopes.simulation(geometry, topo, out, pictures=False, progress=False)
     contact = sim.providers[1]
