@@ -8,6 +8,7 @@ the 288 a fresh compile gives (same bracket of the factor of safety, a different
 clean clone (CI) never sees this; an editable install or a checkout that is edited does.
 
 The rule here is coarse and safe: a SHA-256 of every package file that defines Numba kernels
+(contains ``njit(``)
 is kept in ``fdem/__pycache__/kernel_sources.sha256``; when it differs on import, every cached
 kernel of the package (``__pycache__/*.nbi``, ``*.nbc``) is deleted, so the next call compiles
 from the current sources. A read-only install cannot change, so nothing is done where the
@@ -20,12 +21,13 @@ import os
 from pathlib import Path
 
 STAMP = "kernel_sources.sha256"
-_MARKERS = (b"@njit", b"numba")
+_MARKERS = (b"njit(",)
 
 
 def kernel_sources_digest(root: Path) -> str:
     """SHA-256 over the relative paths and contents of the ``.py`` files under ``root`` that
-    mention Numba (``@njit`` or ``numba``), in sorted order."""
+    define Numba kernels (contain ``njit(``), in sorted order: a module that only sets Numba's
+    thread count does not count."""
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
         data = path.read_bytes()

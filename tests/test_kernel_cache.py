@@ -8,8 +8,9 @@ def _package(tmp_path):
     (root / "kernels" / "__pycache__").mkdir(parents=True)
     (root / "__pycache__").mkdir()
     (root / "kernels" / "helpers.py").write_text("from numba import njit\n@njit(cache=True)\ndef f(x):\n    return x\n")
-    (root / "kernels" / "callers.py").write_text("from numba import njit\nfrom .helpers import f\n")
-    (root / "workflow.py").write_text("def stage():\n    return 1\n")
+    (root / "kernels" / "callers.py").write_text("from numba import njit\nfrom .helpers import f\n@njit(cache=True)\n"
+                                                 "def g(x):\n    return f(x)\n")
+    (root / "workflow.py").write_text("import numba\ndef stage():\n    return numba.get_num_threads()\n")
     return root
 
 
@@ -37,6 +38,6 @@ def test_a_change_outside_the_kernels_keeps_the_cache(tmp_path):
     root = _package(tmp_path)
     refresh_kernel_cache(root)
     cached = _cached(root)
-    (root / "workflow.py").write_text("def stage():\n    return 2\n")   # no Numba in it
+    (root / "workflow.py").write_text("import numba\ndef stage():\n    return 2\n")   # uses Numba, defines no kernel
     assert refresh_kernel_cache(root) is False
     assert sorted(p.name for p in root.rglob("__pycache__/*.nb?")) == cached

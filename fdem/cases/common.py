@@ -19,7 +19,8 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped"]
+__all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
+           "stop_cleanly_on_signals"]
 
 SMALL_MESH_TRIANGLES = 20_000
 """Below this many triangles a case runs on one Numba thread unless ``--threads`` (or
@@ -79,6 +80,24 @@ def threads_for_mesh(requested: int | None, n_triangles: int) -> int:
     if requested is None and "NUMBA_NUM_THREADS" not in os.environ and n_triangles < SMALL_MESH_TRIANGLES:
         numba.set_num_threads(1)
     return numba.get_num_threads()
+
+
+def stop_cleanly_on_signals() -> None:
+    """Make ``kill -TERM`` and ``kill -INT`` end a case as Ctrl-C does (the workflow keeps its
+    stages, the case writes its summary, the solver ``interrupted_state.npz``). Needed because
+    a run started in the background by a non-interactive shell ignores SIGINT, and SIGTERM
+    would otherwise kill it without a word. Only in the main thread (signals go there)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+    signal.signal(signal.SIGTERM, interrupt)
+    signal.signal(signal.SIGINT, interrupt)
 
 
 def cap_simulated_time(sim, t_max: float | None) -> None:

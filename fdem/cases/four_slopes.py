@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
+from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
+                     threads_for_mesh, time_capped)
 
 NAME = "four-slopes"
 # Table 1 of the paper (cases.md A): finite elements
@@ -161,6 +162,7 @@ def main(argv=None) -> dict:
 
     if args.max_steps != 0:
         sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet)
+        stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
         toe_x, toe_y = slope_toe(geometry.bodies[0])
         run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
         cap_simulated_time(sim, args.max_time)

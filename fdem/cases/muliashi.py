@@ -41,7 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
+from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
+                     threads_for_mesh, time_capped)
 
 YOUNG, POISSON, DENSITY, UCS = 5.96e9, 0.15, 2560.0, 34.5e6
 JOINT_COHESION, JOINT_FRICTION = 149.33e3, 12.35
@@ -118,6 +119,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 
     t0 = time.perf_counter()
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
+    stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     cap_simulated_time(sim, args.max_time)
     topo = sim.model.topology
     threads = threads_for_mesh(args.threads, topo.n_triangles)

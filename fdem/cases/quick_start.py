@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import cap_simulated_time, case_parser, check_common, set_threads, threads_for_mesh, time_capped
+from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
+                     threads_for_mesh, time_capped)
 
 NAME = "quick-start"
 HEIGHT, FACE_ANGLE = 10.0, 60.0                 # slope height [m], face angle [deg]
@@ -122,6 +123,7 @@ def main(argv=None) -> dict:
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     geo, sim, cracks, start = build(args.size, out, progress=not args.quiet)
+    stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     toe_x, toe_y = slope_toe(geo.bodies[0])
     report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
     cap_simulated_time(sim, args.max_time)
