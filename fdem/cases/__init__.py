@@ -16,6 +16,9 @@ CASES = {
     "block-on-incline": "fdem.cases.block_on_incline",
     "brazilian-disc": "fdem.cases.brazilian_disc",
     "muliashi": "fdem.cases.muliashi",
+    "planar-failure": "fdem.cases.planar_failure",
+    "newmark-block": "fdem.cases.newmark_block",
+    "ensemble": "fdem.cases.ensemble",
 }
 """Case name (as ``fdem run`` takes it) -> module."""
 

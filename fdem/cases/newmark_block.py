@@ -1,0 +1,187 @@
+"""Newmark sliding block: a block on an incline under a base acceleration history (verification.md).
+
+The plane is inclined by tilting gravity, ``g = 9.81 (sin theta, -cos theta)``, so "down the
+slope" is ``+x``. A deformable block rests on a base body with friction ``phi > theta`` (it
+sticks under gravity alone). After a settling interval ``t_settle`` the base moves along the
+plane with the velocity of a one-cycle sine acceleration pulse ``a_b(t) = -A sin(2 pi t / T)``
+(up the slope first, the base ends at rest), prescribed on every base node
+(:func:`fdem.shaking.shake_base`). The block slips down the slope relative to the base while
+``-a_b`` exceeds the yield acceleration ``a_y = g (cos theta tan phi - sin theta)``.
+
+Exact answer: Newmark's (1965) rigid block, integrated exactly for the same piecewise-linear
+history (:func:`fdem.shaking.newmark_response`). Compared: the block's permanent displacement
+relative to the base (mean over the block's nodes minus the base's, from the start of shaking).
+
+    fdem run newmark-block --out docs/verification           # three mesh sizes: docs/verification/newmark.json
+    python cases/newmark_block.py --size 0.5 --no-pictures
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fdem.cases.common import set_threads
+from fdem.cohesive import CrackProperties, CrackSet
+from fdem.contact import ContactSet
+from fdem.geometry import Geometry, rectangle
+from fdem.materials import ElasticMaterial
+from fdem.meshing import mesh_model
+from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
+from fdem.shaking import AccelerationHistory, newmark_response, shake_base, yield_acceleration
+from fdem.solver import Simulation
+from fdem.topology import build_topology
+
+G = 9.81
+YOUNG, POISSON, DENSITY = 1e9, 0.25, 2700.0
+CONTACT_PENALTY = 20 * YOUNG  # Pa: p = alpha E, alpha = 20
+THETA, PHI = 20.0, 30.0       # deg: a_y = 1.967 m/s^2
+AMPLITUDE_RATIO = 2.0         # A / a_y
+PERIOD = 1.0                  # s
+T_SETTLE = 0.2                # s of gravity alone before the shaking
+SIZES = (0.5, 0.25, 0.125)
+
+
+def unbreakable(young: float) -> CrackProperties:
+    """Crack elements that stay elastic: strengths far above any stress in this scene."""
+    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e15, G_II=1e15, p_n=10 * young)
+
+
+def pulse(theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO, period: float = PERIOD,
+          start: float = T_SETTLE) -> AccelerationHistory:
+    """Base acceleration along the plane (x): ``-ratio a_y sin(2 pi (t - start) / period)``, one cycle."""
+    a_y, _ = yield_acceleration(theta_deg, phi_deg, G)
+    return AccelerationHistory.sine_pulse(-ratio * a_y, period, start=start)
+
+
+def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float = PHI, size: float = 0.5,
+          element_damping: float = DEFAULT_ELEMENT_DAMPING, base_length: float = 8.0,
+          penalty: float = CONTACT_PENALTY):
+    """Model, providers, block node ids and base node ids; the base shaken by ``history`` along x.
+    ``penalty`` [Pa]: contact penalty."""
+    base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
+    block = rectangle(0.5 * base_length - 0.5, 0.5, 1.0, 1.0, name="block")
+    topo = build_topology(mesh_model(Geometry([base, block]), size))
+    model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    if element_damping > 0:
+        model.set_element_damping(element_damping)
+    th = math.radians(theta_deg)
+    model.set_gravity(G * math.sin(th), -G * math.cos(th))
+    base_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 0, 3))
+    block_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 1, 3))
+    shake_base(model, base_nodes, history, components="xy")  # x: the history; y: held (a_y = 0)
+    cracks = CrackSet(topo, {0: unbreakable(YOUNG)})
+    contact = ContactSet(topo, penalty, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
+    return model, [cracks, contact], block_nodes, base_nodes
+
+
+def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO,
+        period: float = PERIOD, t_after: float = 0.5, element_damping: float = DEFAULT_ELEMENT_DAMPING,
+        n_samples: int = 200, penalty: float = CONTACT_PENALTY, max_time: float | None = None) -> dict:
+    """Shake the block; return its slip relative to the base against Newmark's, in time and at the end.
+
+    The run lasts until ``t_after`` [s] past the Newmark block's stopping time, or ``max_time``
+    [s] of simulated time if that is shorter (a smoke run: ``time_capped`` is then true and the
+    error compares an unfinished slip). ``n_samples`` slip samples are recorded along the way.
+    """
+    history = pulse(theta_deg, phi_deg, ratio, period)
+    t_nm, d_nm, _ = newmark_response(history.t, history.along((1, 0)), theta_deg, phi_deg, G)
+    t_end = float(t_nm[-1]) + t_after
+    capped = max_time is not None and max_time < t_end
+    if capped:
+        t_end = max_time
+    model, providers, block, base = build(history, theta_deg, phi_deg, size, element_damping, penalty=penalty)
+    sim = Simulation(model, providers=providers, progress=False)
+    wall = time.perf_counter()
+    sim.run(t_end=min(T_SETTLE, t_end), history_every=10**9, energy_tolerance=0.05, stage="settle")
+
+    def rel(s):  # mean down-slope displacement of the block minus the base's [m]
+        u = s.state.x[:, 0] - s.x0[:, 0]
+        return float(u[block].mean() - u[base].mean())
+
+    r0 = rel(sim)
+    times, slips = [sim.state.time], [0.0]
+    chunk = max(1, int(round((t_end - T_SETTLE) / n_samples / sim.dt)))
+    while sim.state.time < t_end:
+        sim.run(n_steps=chunk, history_every=chunk, stage="shake", energy_tolerance=0.05, final_output=False)
+        times.append(sim.state.time)
+        slips.append(rel(sim) - r0)
+    wall = time.perf_counter() - wall
+    times, slips = np.array(times), np.array(slips)
+    d_exact = float(d_nm[-1])
+    _, d_curve, _ = newmark_response(history.t, history.along((1, 0)), theta_deg, phi_deg, G, t_eval=times)
+    row = sim.history[-1]
+    return {"size_m": size, "theta_deg": theta_deg, "phi_deg": phi_deg,
+            "a_y_m_s2": yield_acceleration(theta_deg, phi_deg, G)[0], "amplitude_m_s2": ratio * yield_acceleration(
+                theta_deg, phi_deg, G)[0], "period_s": period, "t_settle_s": T_SETTLE,
+            "slip_m": float(slips[-1]), "newmark_m": d_exact, "error": float(slips[-1] / d_exact - 1.0),
+            "balance_error_relative": float(row["balance_error_relative"]),
+            "boundary_work_J_per_m": float(row["boundary_work"]), "friction_J_per_m": float(row.get("friction", 0.0)),
+            "n_block_triangles": int(len(block) // 3), "dt_s": sim.dt, "steps": sim.state.step, "wall_s": wall,
+            "element_damping": element_damping, "contact_penalty_Pa": penalty, "time_capped": capped,
+            "t_s": times.tolist(), "slip_curve_m": slips.tolist(), "newmark_curve_m": d_curve.tolist()}
+
+
+def plot(rows: list[dict], png: Path) -> None:
+    """Slip relative to the base against time for each mesh size, with Newmark's rigid block (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    r0 = rows[0]
+    t = np.array(r0["t_s"]) - r0["t_settle_s"]
+    ax.plot(t, 100 * np.array(r0["newmark_curve_m"]), "k-", lw=2.5, label="Newmark (1965) rigid block")
+    for r in rows:
+        ax.plot(np.array(r["t_s"]) - r["t_settle_s"], 100 * np.array(r["slip_curve_m"]), "--", lw=1.4,
+                label=f"FDEM, h = {r['size_m']:g} m ({r['n_block_triangles']} block triangles): "
+                      f"{100 * r['error']:+.2f} %")
+    ax.set_xlabel("time since the start of shaking [s]")
+    ax.set_ylabel("block slip relative to the base [cm]")
+    ax.set_title(f"theta {r0['theta_deg']:g} deg, phi {r0['phi_deg']:g} deg, sine pulse "
+                 f"{r0['amplitude_m_s2']:.3g} m/s^2, T = {r0['period_s']:g} s", fontsize=9)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("runs/newmark"),
+                        help="folder for newmark.json and newmark.png (default runs/newmark; the committed figures: --out docs/verification)")
+    parser.add_argument("--size", type=float, nargs="*", default=list(SIZES), help="element sizes [m]")
+    parser.add_argument("--no-pictures", action="store_true", help="skip the PNG")
+    parser.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
+    parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on each run's simulated time [s] (a smoke run; default: until the block stops)")
+    args = parser.parse_args(argv)
+    if any(not (math.isfinite(h) and h > 0) for h in args.size):
+        parser.error(f"--size must be positive numbers of metres, got {args.size}")
+    if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
+        parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    set_threads(args.threads)
+    rows = []
+    args.out.mkdir(parents=True, exist_ok=True)
+    for size in args.size:
+        r = run(size, max_time=args.max_time)
+        rows.append(r)
+        print(f"h = {size:g} m: slip {100 * r['slip_m']:.3f} cm, Newmark {100 * r['newmark_m']:.3f} cm, "
+              f"error {100 * r['error']:+.2f} %, ledger {r['balance_error_relative']:.2e}, "
+              f"{r['steps']} steps, {r['wall_s']:.1f} s", flush=True)
+        (args.out / "newmark.json").write_text(json.dumps(
+            {"description": "Newmark sliding block: slip relative to the base vs the rigid-block solution",
+             "runs": rows}, indent=1))
+    if not args.no_pictures:
+        plot(rows, args.out / "newmark.png")
+    return {"runs": rows}
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,301 @@
+"""Planar slope failure (verification.md): the factor of safety of a slope with one persistent
+joint daylighting in the face, by strength reduction with the full solver, against the
+Hoek-Bray limit-equilibrium value (:func:`fdem.limit_equilibrium.planar_fos`).
+
+The scene (:func:`planar_failure_simulation`) is built so that the limit-equilibrium
+assumptions hold: a rigid block on a perfectly plastic plane.
+
+* Rock triangles are elastic; intact crack elements (tag 0) are so strong that the rock mass
+  never yields, even at the largest reduction tried: failure can only follow the joints.
+* The sliding plane (tag 1) has the Mohr-Coulomb strength ``c + sigma_n tan(phi)`` of the
+  limit-equilibrium plane and fracture energies so large that its cohesion softens over a
+  slip (``G_II / (c Zbar)``, tens of metres) far beyond the slip at which a trial is judged to
+  fail: the strength stays at its peak along the whole plane while the block slides, so the
+  progressive failure of a brittle joint (which would give a lower factor of safety) is ruled
+  out and the plane behaves perfectly plastic, as limit equilibrium assumes.
+* The tension crack (tag 2) has no cohesion and a near-zero tensile strength, so it carries
+  no force once the block moves away from it (Hoek and Bray's dry crack).
+* Penalties ``p_n = p_t = 5 E`` (the tangential penalty tied to the normal one): the elastic
+  slip before the peak, ``c L / p_t``, is about a micrometre, far below any slip that decides
+  a trial, and the stable step is twice what ``10 E`` allows. Contact (same penalty, below
+  Munjiza's ``alpha = 10..100``) carries nothing here: the joints never break and the block
+  slides out into air.
+* Supports: bottom fixed, sides on rollers; a geostatic start (:func:`fdem.geostatic.geostatic_start`)
+  puts the slope in static equilibrium before any reduction.
+* Each strength-reduction trial (:func:`trial_stage`) is damped by mass-proportional damping
+  critical for the slope's fundamental mode and judged by convergence of the unbalanced-force
+  ratio within a few response times (see there).
+
+    python cases/planar_failure.py --out runs/planar --size 0.7
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fdem.cases.common import set_threads
+from fdem.cohesive import CrackProperties, CrackSet
+from fdem.contact import ContactSet
+from fdem.geostatic import geostatic_start
+from fdem.limit_equilibrium import planar_fos
+from fdem.materials import ElasticMaterial
+from fdem.meshing import mesh_model
+from fdem.model import Model
+from fdem.scenes import planar_slope_model
+from fdem.solver import Damping, Simulation
+from fdem.stages import Convergence, Failure, Stage, factor_of_safety, response_time
+from fdem.topology import build_topology
+
+G = 9.81
+UNIT_WEIGHT = 25e3                              # gamma [N/m^3]
+YOUNG, POISSON, DENSITY = 5e9, 0.25, UNIT_WEIGHT / G
+PENALTY = 5 * YOUNG                             # p_n = p_t = contact penalty [Pa], alpha = 5
+HEIGHT = 10.0                                   # H above the daylight point [m]
+JOINT_COHESION, JOINT_FRICTION = 20e3, 30.0     # c [Pa], phi [deg] of the sliding plane
+
+GEOMETRIES = {
+    "no_crack": dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=None),
+    "tension_crack": dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=2.0),
+    "flat_plane": dict(face_angle=50.0, plane_angle=30.0, tension_crack_offset=None),
+}
+"""The verification geometries, all H = 10 m, c = 20 kPa, phi = 30 deg, gamma = 25 kN/m^3."""
+
+
+@dataclass(frozen=True)
+class PlanarScene:
+    """What :func:`planar_failure_simulation` built."""
+
+    sim: Simulation
+    cracks: CrackSet
+    contact: ContactSet
+    block_nodes: np.ndarray       # exploded nodes of the sliding block
+    geostatic: object             # fdem.geostatic.GeostaticReport
+    n_triangles: int
+
+
+def property_sets(cohesion: float = JOINT_COHESION, friction_angle: float = JOINT_FRICTION,
+                  penalty: float = PENALTY, slip_to_soften: float = 50.0) -> dict[int, CrackProperties]:
+    """Crack-element properties: tag 0 intact rock (never yields), tag 1 the sliding plane, tag 2
+    the tension crack.
+
+    Plane: ``f_t = c / 10`` (a tension cut-off; the plane is in compression wherever the block
+    rests on it), ``G_II = c Zbar d`` with ``Zbar = 0.386`` the area under the Munjiza softening
+    curve, so the cohesion is spent only after a slip ``d = slip_to_soften`` [m]: perfectly
+    plastic over the centimetres a failing trial slides. Intact rock: ``f_t = c = 100 MPa``,
+    two orders above the largest geostatic stress (``gamma H_total`` about 0.4 MPa) even when
+    divided by a reduction factor of 10. Tension crack: ``c = 0``, ``f_t = 100 Pa``.
+    """
+    zbar = 0.38631
+    common = dict(p_n=penalty, p_t=penalty)
+    strong = 100e6
+    return {
+        0: CrackProperties(f_t=strong, c=strong, phi=45.0, G_I=1e8, G_II=1e8, name="intact rock", **common),
+        1: CrackProperties(f_t=cohesion / 10, c=cohesion, phi=friction_angle,
+                           G_I=cohesion / 10 * zbar * slip_to_soften, G_II=cohesion * zbar * slip_to_soften,
+                           name="sliding plane", **common),
+        2: CrackProperties(f_t=100.0, c=0.0, phi=friction_angle, G_I=1.0, G_II=0.0, name="tension crack",
+                           **common),
+    }
+
+
+def analytic(face_angle: float, plane_angle: float, tension_crack_offset: float | None = None,
+             height: float = HEIGHT, cohesion: float = JOINT_COHESION, friction_angle: float = JOINT_FRICTION):
+    """The Hoek-Bray factor of safety of the scene (dry)."""
+    return planar_fos(height, face_angle, plane_angle, cohesion, friction_angle, UNIT_WEIGHT,
+                      tension_crack_offset=tension_crack_offset)
+
+
+def planar_failure_simulation(geometry, size: float, cohesion: float = JOINT_COHESION,
+                              friction_angle: float = JOINT_FRICTION, penalty: float = PENALTY,
+                              out_dir: Path | None = None, pictures: bool = False,
+                              progress: bool = False) -> PlanarScene:
+    """Mesh ``geometry`` (a :func:`fdem.scenes.planar_slope_model`) at ``size`` [m] and build the
+    simulation: elastic rock, crack elements (:func:`property_sets`), contact with the joint's
+    friction, bottom fixed, sides on rollers, gravity, and a static geostatic start."""
+    topo = build_topology(mesh_model(geometry, size))
+    model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
+    model.set_gravity(0.0, -G)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    # Element damping (0.1 of each triangle's critical value, docs/damping.md): without it the
+    # tension-crack slope rang at the crack-element frequencies, which the fundamental-mode
+    # damping of the trials does not reach, and stable trials near the limit failed to converge
+    # (F = 1.25 on the 0.5 m mesh: unbalanced-force ratio 0.27 after 5 T; with it: converged in 1 T).
+    model.set_element_damping()
+    cracks = CrackSet(topo, property_sets(cohesion, friction_angle, penalty), contact_penalty=penalty)
+    report = geostatic_start(model, cracks)
+    contact = ContactSet(topo, penalty, friction_angle=friction_angle, mass=model.node_mass(), cracks=cracks)
+    sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="planar", pictures=pictures,
+                     progress=progress)
+    return PlanarScene(sim, cracks, contact, block_nodes(topo), report, topo.n_triangles)
+
+
+def block_nodes(topo) -> np.ndarray:
+    """Exploded nodes of the sliding block: the triangles joined to the face above the daylight
+    point through intact crack elements only (the joints cut the block off)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    keep = topo.crack_tag == 0
+    a, b = topo.crack_triangles[keep].T
+    n = topo.n_triangles
+    _, label = connected_components(coo_matrix((np.ones(a.size), (a, b)), shape=(n, n)), directed=False)
+    on_plane = np.flatnonzero(topo.crack_tag == 1)
+    ends = topo.x0[topo.crack_nodes[on_plane, :2]].reshape(-1, 2)
+    d = ends[np.argmin(ends[:, 1])]
+    tangent = ends[np.argmax(ends[:, 1])] - d
+    normal = np.array([-tangent[1], tangent[0]])          # up-slope normal: into the block
+    pair = topo.crack_triangles[on_plane[0]]
+    centroid = topo.x0[topo.triangles[pair]].mean(axis=1)
+    t = int(pair[np.argmax((centroid - d) @ normal)])
+    return np.flatnonzero(np.repeat(label == label[t], 3))
+
+
+def trial_stage(sim: Simulation, periods: float = 5.0, unbalanced_ratio: float = 1e-4) -> Stage:
+    """The damped trial of the strength-reduction search for this scene.
+
+    Damping: mass-proportional, ``alpha = 2 omega_1 = 4 pi / T`` [1/s], critical for the
+    fundamental mode of period ``T = 4 H / c_s`` (:func:`fdem.stages.response_time`). It
+    vanishes at rest, so a converged state is the static equilibrium whatever its value, and
+    it brings a stable slope to ``R < 1e-4`` within about 1.5 T; Cundall's local damping
+    (0.8) needs over 10 T here, and its force ``0.8 |f|`` on every node of a sliding block,
+    scaled by the large internal forces, holds a failing block to a creep that looks settled.
+
+    Rule: stable when the unbalanced-force ratio ``R = sum |f_net| / sum |m g|`` falls below
+    ``unbalanced_ratio`` within ``periods`` T; failing otherwise (non-convergence, Dawson, Roth
+    & Drescher 1999) or when a node moves 1 % of the model height. A failing block creeps at
+    ``v = a_net / alpha`` while ``R`` stays near the net driving force over the weight of the
+    model, above the limit: measured 5e-4 at F only 0.3 % above the Hoek-Bray value (no-crack
+    geometry, 364 triangles), 2e-2 at 30 % above.
+    """
+    T = response_time(sim.model)
+    return Stage("trial", max_time=periods * T, converge=Convergence(unbalanced_ratio=unbalanced_ratio),
+                 fail=Failure(), damping=Damping(mass_proportional=4.0 * math.pi / T))
+
+
+def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol: float = 0.01,
+             out_dir: Path | None = None, pictures: bool = False, max_time: float | None = None,
+             **fos_options) -> dict:
+    """Factor of safety of geometry ``name`` (:data:`GEOMETRIES`) at mesh ``size`` [m] by
+    strength reduction (:func:`fdem.stages.factor_of_safety`), with the analytic value.
+    ``max_time`` [s]: cap on each trial's simulated time (a smoke run: capped trials count as
+    failing, so its factor of safety means nothing)."""
+    from fdem.cases.common import cap_simulated_time
+
+    g = GEOMETRIES[name]
+    le = analytic(**g)
+    t0 = time.perf_counter()
+    scene = planar_failure_simulation(planar_slope_model(HEIGHT, **g), size, out_dir=out_dir, pictures=pictures)
+    cap_simulated_time(scene.sim, max_time)
+    t1 = time.perf_counter()
+    try:
+        result = factor_of_safety(scene.sim, lower, upper, tol=tol, trial=trial_stage(scene.sim), **fos_options)
+    except ValueError as err:
+        if max_time is None:
+            raise
+        # a smoke run: the capped trials cannot converge, so the bracket "fails" at its lower end
+        return {"geometry": name, "size_m": size, "n_triangles": scene.n_triangles, "dt_s": scene.sim.dt,
+                "analytic_fos": le.fos, "fos": None, "bracket": None, "time_capped": True,
+                "capped_trial": str(err), "steps": int(scene.sim.state.step),
+                "seconds_build": t1 - t0, "seconds_fos": time.perf_counter() - t1}
+    t2 = time.perf_counter()
+    fos = float(result.fos)
+    return {
+        "geometry": name, **{k: v for k, v in g.items()}, "height_m": HEIGHT,
+        "cohesion_Pa": JOINT_COHESION, "friction_deg": JOINT_FRICTION, "unit_weight_N_m3": UNIT_WEIGHT,
+        "size_m": size, "n_triangles": scene.n_triangles, "dt_s": scene.sim.dt,
+        "analytic_fos": le.fos, "analytic": le.as_dict(),
+        "fos": fos, "bracket": [float(b) for b in result.bracket],
+        "error_relative": fos / le.fos - 1.0,
+        "n_trials": len(result.trials),
+        "trials": [{k: t.as_dict()[k] for k in ("factor", "stable", "reason", "t_end", "t_start", "steps",
+                                                 "unbalanced_ratio", "max_displacement", "wall_seconds")}
+                   for t in result.trials],
+        "failure_surface_tags": {int(k): int(v) for k, v in zip(*np.unique(scene.cracks.tag[result.failure_surface],
+                                                                             return_counts=True))},
+        "n_broken_first_failure": int(result.failure_broken.size),
+        "seconds_build": t1 - t0, "seconds_fos": t2 - t1, "time_capped": max_time is not None,
+    }
+
+
+def plot(rows: list, path: Path) -> Path:
+    """FoS from strength reduction (bracket as error bar) against triangles, per geometry, with
+    the Hoek-Bray value and its +-10 % band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = sorted({r["geometry"] for r in rows}, key=list(GEOMETRIES).index)
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        mine = sorted((r for r in rows if r["geometry"] == name), key=lambda r: r["n_triangles"])
+        n = [r["n_triangles"] for r in mine]
+        f = np.array([r["fos"] for r in mine])
+        lo = f - np.array([r["bracket"][0] for r in mine])
+        hi = np.array([r["bracket"][1] for r in mine]) - f
+        F = mine[0]["analytic_fos"]
+        ax.axhspan(0.9 * F, 1.1 * F, color="0.9", label="Hoek-Bray +-10 %")
+        ax.axhline(F, color="k", lw=1, label=f"Hoek-Bray F = {F:.3f}")
+        ax.errorbar(n, f, yerr=[lo, hi], fmt="o-", capsize=3, label="strength reduction")
+        ax.set_xscale("log")
+        ax.set_xlabel("triangles")
+        ax.set_ylabel("factor of safety")
+        g = GEOMETRIES[name]
+        crack = "" if g["tension_crack_offset"] is None else f", crack b = {g['tension_crack_offset']:g} m"
+        ax.set_title(f"psi_f {g['face_angle']:g}, psi_p {g['plane_angle']:g}{crack}", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path
+
+
+def main(argv=None) -> list:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("runs/planar_failure"))
+    parser.add_argument("--size", type=float, nargs="+", default=[1.0, 0.7, 0.5],
+                        help="element sizes [m], one run per size and geometry")
+    parser.add_argument("--geometry", nargs="+", choices=list(GEOMETRIES), default=["no_crack", "tension_crack"])
+    parser.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
+    parser.add_argument("--lower", type=float, default=0.8, help="reduction factor known to be stable")
+    parser.add_argument("--upper", type=float, default=2.0, help="reduction factor known to fail")
+    parser.add_argument("--tol", type=float, default=0.01, help="bracket width at which the search stops")
+    parser.add_argument("--no-pictures", action="store_true", help="skip the FoS-against-mesh figure")
+    parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on each trial's simulated time [s] (a smoke run: its FoS means nothing)")
+    args = parser.parse_args(argv)
+    if any(not (math.isfinite(h) and h > 0) for h in args.size):
+        parser.error(f"--size must be positive numbers of metres, got {args.size}")
+    if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
+        parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    set_threads(args.threads)
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name in args.geometry:
+        for size in args.size:
+            r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time)
+            rows.append(r)
+            (args.out / "planar_failure.json").write_text(json.dumps(rows, indent=1))
+            if r["fos"] is None:
+                print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, trials capped at "
+                      f"{args.max_time:g} s: no factor of safety (smoke run)", flush=True)
+                continue
+            print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, FoS {r['fos']:.3f} "
+                  f"in [{r['bracket'][0]:.3f}, {r['bracket'][1]:.3f}] against Hoek-Bray {r['analytic_fos']:.3f} "
+                  f"({100 * r['error_relative']:+.1f} %), {r['seconds_fos']:.0f} s", flush=True)
+    print(f"wrote {args.out / 'planar_failure.json'}")
+    if not args.no_pictures and any(r["fos"] is not None for r in rows):
+        print(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
