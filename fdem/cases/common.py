@@ -48,8 +48,10 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
 
 
 def check_common(parser: argparse.ArgumentParser, args) -> None:
-    """Refuse bad values of the shared options before anything long starts."""
-    if args.size is not None and not (math.isfinite(args.size) and args.size > 0):
+    """Refuse bad values of the shared options before anything long starts (``--size`` may be
+    one number or, for the cases that sweep sizes, a list)."""
+    sizes = args.size if isinstance(args.size, list) else [] if args.size is None else [args.size]
+    if any(not (math.isfinite(h) and h > 0) for h in sizes):
         parser.error(f"--size must be a positive number of metres, got {args.size}")
     if args.threads is not None and args.threads < 1:
         parser.error(f"--threads must be at least 1, got {args.threads}")

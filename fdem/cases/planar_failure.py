@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import set_threads
+from fdem.cases.common import check_common, set_threads
 from fdem.cohesive import CrackProperties, CrackSet
 from fdem.contact import ContactSet
 from fdem.geostatic import geostatic_start
@@ -272,10 +272,7 @@ def main(argv=None) -> list:
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each trial's simulated time [s] (a smoke run: its FoS means nothing)")
     args = parser.parse_args(argv)
-    if any(not (math.isfinite(h) and h > 0) for h in args.size):
-        parser.error(f"--size must be positive numbers of metres, got {args.size}")
-    if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
-        parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    check_common(parser, args)
     set_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
