@@ -11,71 +11,21 @@ from __future__ import annotations
 
 from numba import njit
 
-from fdem.kernels.contact import (CLOSE_TOL, FASTMATH, MAX_VERT, N_COL, N_IWORK, N_WORK, TOUCH_EPS, _NONE,  # noqa: F401
-                                  _corners, _line_integrals, _max3, _orient, _overlap_clip, _sat)
+from fdem.kernels.contact import (CLOSE_TOL, FASTMATH, MAX_VERT, N_COL, N_IWORK, N_WORK, _NONE,  # noqa: F401
+                                  _corners, _line_integrals, _overlap_clip, _sat)
+
 
 
 @njit(cache=True, error_model="numpy")
 def _sat_uv(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
-    """:func:`_sat` returning the ``v`` values too (for :func:`pair_normal_edges`; the pair loop
-    keeps the shorter tuple of :func:`_sat`). Separating-axis test of triangles c and t on their six edges, in strict arithmetic (no
-    fast-math, and scalars only, so that it costs no reference counting: corners lying on the
-    other's edge give exact zeros, and touching counts as apart).
-
-    ``u_ij = 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}`` and
-    ``v_kj = 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}`` with ``D_ik = t_k - c_i``; the pair
-    is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
-    counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
-    ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
-    Returns ``(overlap?, u00, u01, ..., u22, v00, v01, ..., v22)``.
-    """
-    # differences D_ik = t_k - c_i
-    d00x = t0x - c0x
-    d00y = t0y - c0y
-    d01x = t1x - c0x
-    d01y = t1y - c0y
-    d02x = t2x - c0x
-    d02y = t2y - c0y
-    d10x = t0x - c1x
-    d10y = t0y - c1y
-    d11x = t1x - c1x
-    d11y = t1y - c1y
-    d12x = t2x - c1x
-    d12y = t2y - c1y
-    d20x = t0x - c2x
-    d20y = t0y - c2y
-    d21x = t1x - c2x
-    d21y = t1y - c2y
-    d22x = t2x - c2x
-    d22y = t2y - c2y
-    # 2A_t lambda^t_j(c_i) = D_{i,j+1} x D_{i,j+2}
-    u00 = _orient(d01x, d01y, d02x, d02y)
-    u01 = _orient(d02x, d02y, d00x, d00y)
-    u02 = _orient(d00x, d00y, d01x, d01y)
-    u10 = _orient(d11x, d11y, d12x, d12y)
-    u11 = _orient(d12x, d12y, d10x, d10y)
-    u12 = _orient(d10x, d10y, d11x, d11y)
-    u20 = _orient(d21x, d21y, d22x, d22y)
-    u21 = _orient(d22x, d22y, d20x, d20y)
-    u22 = _orient(d20x, d20y, d21x, d21y)
-    # 2A_c lambda^c_j(t_k) = D_{j+1,k} x D_{j+2,k}
-    v00 = _orient(d10x, d10y, d20x, d20y)
-    v01 = _orient(d20x, d20y, d00x, d00y)
-    v02 = _orient(d00x, d00y, d10x, d10y)
-    v10 = _orient(d11x, d11y, d21x, d21y)
-    v11 = _orient(d21x, d21y, d01x, d01y)
-    v12 = _orient(d01x, d01y, d11x, d11y)
-    v20 = _orient(d12x, d12y, d22x, d22y)
-    v21 = _orient(d22x, d22y, d02x, d02y)
-    v22 = _orient(d02x, d02y, d12x, d12y)
-    # deepest reach of c past each edge line of t (and of t past c's), against the threshold
-    # TOUCH_EPS 2A (2A_t = u_i0 + u_i1 + u_i2, 2A_c = v_k0 + v_k1 + v_k2 for any i, k)
-    reach_t = min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22)))
-    reach_c = min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22)))
-    hit = reach_t > TOUCH_EPS * (u00 + u01 + u02) and reach_c > TOUCH_EPS * (v00 + v01 + v02)
-    return (hit, u00, u01, u02, u10, u11, u12, u20, u21, u22,
-            v00, v01, v02, v10, v11, v12, v20, v21, v22)
-
+    """The kernel's separating-axis test (:func:`fdem.kernels.contact._sat`) with the ``v``
+    values too: ``v_kj = 2A_c lambda^c_j(t_k)`` are the ``u`` values of the swapped call, bit
+    for bit (its differences are the exact negatives ``-D``, and ``(-a) x (-b) = a x b``).
+    Returns ``(overlap?, u00, ..., u22, v00, ..., v22)``."""
+    a = _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+    b = _sat(t0x, t0y, t1x, t1y, t2x, t2y, c0x, c0y, c1x, c1y, c2x, c2y)
+    return (a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9],
+            b[1], b[2], b[3], b[4], b[5], b[6], b[7], b[8], b[9])
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 def _span(a0, a1, a2, b0, b1, b2, strict):
