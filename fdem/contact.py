@@ -337,6 +337,7 @@ class ContactSet:
         self._bounds = np.zeros(2, np.int64)        # chunks of the pair loop
         self._f_target = np.zeros((0, 6))           # target-side forces, stored per pair
         self._touching = np.zeros(0, np.uint8)
+        self._witness = np.zeros(0, np.uint8)       # separating axis of each pair (a cache)
         self._inc_ptr = np.zeros(1, np.int64)       # pairs by target triangle
         self._inc_pair = np.zeros(0, np.int64)
         self._x_search = None
@@ -605,6 +606,7 @@ class ContactSet:
         self._bounds = kc.chunk_bounds(self._pair_i, min(1024, max(1, len(pairs) // 128)))
         self._f_target = np.zeros((len(pairs), 6))
         self._touching = touching
+        self._witness = np.zeros(len(pairs), np.uint8)
         self._inc_ptr, self._inc_pair = kc.target_incidence(self._pair_j, self._slot, self._active.size)
         self._x_search = x.copy()
         self._needs_search = False
@@ -642,7 +644,7 @@ class ContactSet:
             return
         e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
                                             self._mu_pair, self._kt_pair, self._damp_pair, float(dt),
-                                            self._history, self._f_target, self._touching, f)
+                                            self._history, self._f_target, self._touching, self._witness, f)
         kc.gather_forces(f, self._active, self._inc_ptr, self._inc_pair, self._f_target, self._touching)
         self._e_normal = e_n
         self._e_tangential = e_t
@@ -754,6 +756,7 @@ class ContactSet:
         self._reduction = float(d["reduction"])
         for name in self._PAIR_STATE:
             setattr(self, name, np.array(d["pair" + name if name[0] == "_" else name], copy=True))
+        self._witness = np.zeros(len(self.pairs), np.uint8)   # a cache: zeros are valid
         self._x_search = None if d["x_search"] is None else np.array(d["x_search"], dtype=np.float64)
         self._needs_search = bool(d["needs_search"])
         self.n_searches = int(d["n_searches"])

@@ -65,7 +65,7 @@ def load_case(name: str):
 
 def glue(young: float, alpha: float, tangential: float | None = None) -> CrackProperties:
     """Crack elements that never yield, penalty ``p_n = alpha E`` (``p_t`` tied unless given)."""
-    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e15, G_II=1e15, p_n=alpha * young,
+    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e30, G_II=1e30, p_n=alpha * young,
                            p_t=alpha * young if tangential is None else tangential)
 
 

@@ -276,6 +276,15 @@ def _line_integrals(l0, l1, l2, d0, d1, d2):
 
 @njit(cache=True, error_model="numpy")
 def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """Separating-axis test of triangles c and t (:func:`_sat_axis`).
+    Returns ``(overlap?, u00, u01, ..., u22)``."""
+    axis, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat_axis(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                                  t0x, t0y, t1x, t1y, t2x, t2y)
+    return axis == 0, u00, u01, u02, u10, u11, u12, u20, u21, u22
+
+
+@njit(cache=True, error_model="numpy")
+def _sat_axis(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     """Separating-axis test of triangles c and t on their six edges, in strict arithmetic (no
     fast-math, and scalars only, so that it costs no reference counting: corners lying on the
     other's edge give exact zeros, and touching counts as apart).
@@ -285,7 +294,9 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     is apart when, for some ``j``, all three ``u_ij <= 0`` or all three ``v_kj <= 0``; it also
     counts as apart (a round-off sliver, see the module docstring) when, for some ``j``,
     ``max_i u_ij <= TOUCH_EPS 2A_t`` or ``max_k v_kj <= TOUCH_EPS 2A_c``.
-    Returns ``(overlap?, u00, u01, ..., u22)``.
+    Returns ``(axis, u00, u01, ..., u22)``: ``axis`` 0 when the triangles overlap, else the
+    first axis that separates them, ``1 + j`` for t's edge ``j``, ``4 + j`` for c's edge ``j``
+    (the witness that :func:`_apart_on` re-checks at the next step).
     """
     # differences D_ik = t_k - c_i
     d00x = t0x - c0x
@@ -328,10 +339,61 @@ def _sat(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     v22 = _orient(d02x, d02y, d12x, d12y)
     # deepest reach of c past each edge line of t (and of t past c's), against the threshold
     # TOUCH_EPS 2A (2A_t = u_i0 + u_i1 + u_i2, 2A_c = v_k0 + v_k1 + v_k2 for any i, k)
-    reach_t = min(_max3(u00, u10, u20), min(_max3(u01, u11, u21), _max3(u02, u12, u22)))
-    reach_c = min(_max3(v00, v10, v20), min(_max3(v01, v11, v21), _max3(v02, v12, v22)))
-    hit = reach_t > TOUCH_EPS * (u00 + u01 + u02) and reach_c > TOUCH_EPS * (v00 + v01 + v02)
-    return hit, u00, u01, u02, u10, u11, u12, u20, u21, u22
+    thr_t = TOUCH_EPS * (u00 + u01 + u02)
+    thr_c = TOUCH_EPS * (v00 + v01 + v02)
+    axis = 0
+    if _max3(u00, u10, u20) <= thr_t:
+        axis = 1
+    elif _max3(u01, u11, u21) <= thr_t:
+        axis = 2
+    elif _max3(u02, u12, u22) <= thr_t:
+        axis = 3
+    elif _max3(v00, v10, v20) <= thr_c:
+        axis = 4
+    elif _max3(v01, v11, v21) <= thr_c:
+        axis = 5
+    elif _max3(v02, v12, v22) <= thr_c:
+        axis = 6
+    return axis, u00, u01, u02, u10, u11, u12, u20, u21, u22
+
+
+@njit(cache=True, error_model="numpy")
+def _apart_on(axis, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """True when the witness ``axis`` of :func:`_sat_axis` (1-3: t's edge ``axis - 1``, 4-6:
+    c's edge ``axis - 4``) still separates c and t.
+
+    The same strict expressions as :func:`_sat_axis` for that one axis (its three ``u_ij`` or
+    ``v_kj`` and the ``2A`` they are measured against), so "apart" here is bit for bit the
+    verdict of the full test: 5 orientation determinants instead of 18. Pairs of a settled pile
+    or of neighbouring blocks stay apart on the same axis for many steps.
+    """
+    if axis <= 3:
+        # t's edge j, from t_{j+1} to t_{j+2}; u_ij = (t_{j+1} - c_i) x (t_{j+2} - c_i)
+        if axis == 1:
+            ax, ay, bx, by = t1x, t1y, t2x, t2y
+        elif axis == 2:
+            ax, ay, bx, by = t2x, t2y, t0x, t0y
+        else:
+            ax, ay, bx, by = t0x, t0y, t1x, t1y
+        thr = TOUCH_EPS * (_orient(t1x - c0x, t1y - c0y, t2x - c0x, t2y - c0y)
+                           + _orient(t2x - c0x, t2y - c0y, t0x - c0x, t0y - c0y)
+                           + _orient(t0x - c0x, t0y - c0y, t1x - c0x, t1y - c0y))
+        return _max3(_orient(ax - c0x, ay - c0y, bx - c0x, by - c0y),
+                     _orient(ax - c1x, ay - c1y, bx - c1x, by - c1y),
+                     _orient(ax - c2x, ay - c2y, bx - c2x, by - c2y)) <= thr
+    # c's edge j, from c_{j+1} to c_{j+2}; v_kj = (t_k - c_{j+1}) x (t_k - c_{j+2})
+    if axis == 4:
+        ax, ay, bx, by = c1x, c1y, c2x, c2y
+    elif axis == 5:
+        ax, ay, bx, by = c2x, c2y, c0x, c0y
+    else:
+        ax, ay, bx, by = c0x, c0y, c1x, c1y
+    thr = TOUCH_EPS * (_orient(t0x - c1x, t0y - c1y, t0x - c2x, t0y - c2y)
+                       + _orient(t0x - c2x, t0y - c2y, t0x - c0x, t0y - c0y)
+                       + _orient(t0x - c0x, t0y - c0y, t0x - c1x, t0y - c1y))
+    return _max3(_orient(t0x - ax, t0y - ay, t0x - bx, t0y - by),
+                 _orient(t1x - ax, t1y - ay, t1x - bx, t1y - by),
+                 _orient(t2x - ax, t2y - ay, t2x - bx, t2y - by)) <= thr
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -535,8 +597,8 @@ def tangential_law(ft, du, kt, cap):
 
 # ----------------------------------------------------------------------------- pair loop
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
-def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, f,
-                w, iw, pool):
+def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, witness,
+                f, w, iw, pool):
     """The pair loop of :func:`pair_forces` over ``q in [lo, hi)`` (``lo`` and ``hi`` at changes of
     ``pair_i``): adds the contactors' forces into ``f``, stores the targets' in ``f_t``; returns
     the four energy sums."""
@@ -571,14 +633,20 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
             s2y = 0.0
         j = pair_j[q]
         c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y = _corners(x, i, j)
-        hit, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat(c0x, c0y, c1x, c1y, c2x, c2y,
-                                                                t0x, t0y, t1x, t1y, t2x, t2y)
         area = 0.0
-        if hit:
-            (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
-             bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x,
-                                                                 t1y, t2x, t2y, u00, u01, u02, u10, u11, u12, u20,
-                                                                 u21, u22, penalty, w, iw, pool)
+        wq = witness[q]
+        # a pair still apart on last step's separating axis skips the full test (same verdict)
+        if wq == 0 or not _apart_on(wq, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+            axis, u00, u01, u02, u10, u11, u12, u20, u21, u22 = _sat_axis(c0x, c0y, c1x, c1y, c2x, c2y,
+                                                                          t0x, t0y, t1x, t1y, t2x, t2y)
+            if axis != wq:
+                witness[q] = axis
+            if axis == 0:
+                (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y,
+                 bt0x, bt0y, bt1x, bt1y, bt2x, bt2y) = _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y,
+                                                                     t1x, t1y, t2x, t2y, u00, u01, u02, u10,
+                                                                     u11, u12, u20, u21, u22, penalty, w, iw,
+                                                                     pool)
         if not area > 0.0:
             if touching[q]:   # it separated: drop its history (untouched pairs have none)
                 touching[q] = 0
@@ -720,7 +788,7 @@ def chunk_bounds(pair_i, n_chunks):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching,
-                          f, stride):
+                          witness, f, stride):
     """Parallel driver of :func:`pair_forces`: (n_chunks, 4) energy sums per chunk of pairs.
     Iteration ``it`` runs chunk ``it * stride mod n_chunks`` (``stride`` coprime, about 0.618
     n_chunks), so each thread's contiguous share of iterations is spread over the whole pair
@@ -733,7 +801,7 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, da
         iw = np.empty(N_IWORK, np.int64)
         pool = np.empty((MAX_VERT, N_COL))
         a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair, damp,
-                                 dt, spring, f_t, touching, f, w, iw, pool)
+                                 dt, spring, f_t, touching, witness, f, w, iw, pool)
         sums[ch, 0] = a
         sums[ch, 1] = b
         sums[ch, 2] = c
@@ -742,7 +810,7 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, da
 
 
 @njit(cache=True, error_model="numpy")
-def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, f):
+def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, witness, f):
     """Contact forces of all candidate pairs: contactors' added into ``f``, targets' stored per pair.
 
     Parameters
@@ -780,6 +848,10 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, sp
         Updated: 1 where the pair overlaps (its ``f_t`` row needs gathering). On entry 0 must
         mean that the pair's ``spring`` row is zero (the loop reads neither for pairs that
         stay apart).
+    witness : (n_pairs,) uint8
+        Updated: the axis that separated the pair at its last test (:func:`_sat_axis`; 0 when
+        it overlapped or is new). A cache, not state: zeros are always valid, and the forces
+        do not depend on it.
     f : (n_nodes, 2) float64
         Forces on c's corners are added here [N/m].
 
@@ -795,7 +867,7 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, sp
         while _gcd(stride, n_chunks) != 1:
             stride += 1
         sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t,
-                                     touching, f, stride)
+                                     touching, witness, f, stride)
     else:
         sums = np.zeros((n_chunks, 4))
         w = np.empty(N_WORK)
@@ -803,7 +875,7 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, sp
         pool = np.empty((MAX_VERT, N_COL))
         for ch in range(n_chunks):
             a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair,
-                                     damp, dt, spring, f_t, touching, f, w, iw, pool)
+                                     damp, dt, spring, f_t, touching, witness, f, w, iw, pool)
             sums[ch, 0] = a
             sums[ch, 1] = b
             sums[ch, 2] = c
