@@ -30,7 +30,7 @@ from .solver import NO_DAMPING, Simulation
 from .stages import (Convergence, Failure, Stage, crack_set_of, factor_of_safety, fundamental_damping,
                      response_time, run_stage)
 
-__all__ = ["SlopeWorkflow", "run_slope_workflow", "reduction_steps", "factor_of_safety_figures"]
+__all__ = ["SlopeWorkflow", "run_slope_workflow", "runout_stage", "reduction_steps", "factor_of_safety_figures"]
 
 
 def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[float, ...]:
@@ -168,10 +168,17 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             from .checkpoint import save_checkpoint
 
             summary["runout_checkpoint"] = str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
-        cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
-        record(run_stage(sim, Stage("runout", max_time=cap, damping=NO_DAMPING,
-                                    converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio,
-                                                         min_time=T, hold_for=T))))
+        record(run_stage(sim, runout_stage(wf, T, height, g)))
+
+
+def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
+    """The dynamic runout stage of the workflow: no damping; ends when the kinetic energy has
+    stayed below ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after
+    at least ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free
+    falls over the model height ``H`` [m] under gravity ``g`` [m/s^2])."""
+    cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
+    return Stage("runout", max_time=cap, damping=NO_DAMPING,
+                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T))
 
 
 def factor_of_safety_figures(result: dict) -> dict:

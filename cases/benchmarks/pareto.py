@@ -14,7 +14,8 @@ Problems: wave (P-wave arrival on an exploded mesh with glued crack elements), c
 (gravity column: stresses and settlement, i.e. static stiffness), mode1 (one cohesive joint
 pulled apart: dissipated energy), brazilian (disc: recovered tensile strength), direction
 (Brazilian load direction against the mesh and process-zone size), incline (sliding block),
-impact (two-body impact: energy), planar (planar slope factor of safety), tangential (the
+impact (two-body impact: energy), runout (the demo slope's runout to rest: time step against
+the chaotic spread of runout distance), planar (planar slope factor of safety), tangential (the
 four-slope tangential penalty, paper against tied), longrun (1e6 steps on a small mesh:
 ledger drift).
 
@@ -417,7 +418,68 @@ def tangential_study(size: float, with_fos: bool = True) -> list[dict]:
     return rows
 
 
-# ============================================================================ 9. long run
+# ============================================================================ 9. runout of the demo slope
+RUNOUT_DIR = ROOT / "runs" / "pareto_runout"
+
+
+def runout_start() -> Path:
+    """The failed state of the quick-start slope (``fdem demo``) that its runout starts from:
+    made once by running the demo's workflow (``runs/pareto_runout/runout_start.npz``)."""
+    path = RUNOUT_DIR / "runout_start.npz"
+    if not path.exists():
+        from fdem.cases import quick_start
+        from fdem.workflow import SlopeWorkflow, run_slope_workflow
+
+        _, sim, _, _ = quick_start.build(quick_start.SIZE, None, progress=False)
+        RUNOUT_DIR.mkdir(parents=True, exist_ok=True)
+        run_slope_workflow(sim, SlopeWorkflow(), out_dir=RUNOUT_DIR)
+        sim.close()
+    return path
+
+
+def runout(safety: float, seed: int | None = None, kick: float = 1e-6) -> dict:
+    """The demo slope's runout to rest (the workflow's runout stage) from its failed state, at
+    step factor ``safety``; with ``seed``, every node's velocity is first nudged by
+    ``kick`` [m/s] (normal, seeded): the spread of such runs is the chaotic noise floor that a
+    time-step effect must exceed to matter. Error measures: the ledger's balance error relative
+    to the energy moved, and (in the docs) the runout distance against the smallest step."""
+    from fdem.analysis import runout as runout_figures
+    from fdem.analysis import slope_toe
+    from fdem.cases import quick_start
+    from fdem.checkpoint import load_checkpoint
+    from fdem.stages import response_time, run_stage
+    from fdem.workflow import SlopeWorkflow, runout_stage
+
+    start = runout_start()
+    geo, sim, cracks, _ = quick_start.build(quick_start.SIZE, None, progress=False)
+    load_checkpoint(sim, start)
+    t0 = time.perf_counter()   # the runout alone
+    step0 = sim.state.step
+    sim.safety = safety
+    sim.dt = sim._choose_dt()
+    if seed is not None:
+        sim.state.v += kick * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
+    topo = sim.model.topology
+    t_start, broken0 = sim.state.time, int(cracks.broken.sum())
+    res = run_stage(sim, runout_stage(SlopeWorkflow(), response_time(sim.model), float(np.ptp(topo.x0[:, 1])),
+                                      float(np.linalg.norm(sim.gravity))), frames=False)
+    toe_x, _ = slope_toe(geo.bodies[0])
+    fig = runout_figures(topo, sim.state.x, toe_x)
+    last = sim.history[-1]
+    row = {"problem": "runout", "h": quick_start.SIZE, "alpha": None, "safety": safety, "seed": seed,
+           "kick_m_s": kick if seed is not None else 0.0, "n_triangles": topo.n_triangles, "reason": res.reason,
+           "runout_time_s": sim.state.time - t_start, "runout_distance_m": fig["runout_distance_m"],
+           "displaced_area_m2": fig["displaced_area_m2"], "broken": int(cracks.broken.sum()),
+           "broken_in_runout": int(cracks.broken.sum()) - broken0,
+           "balance_error_relative": float(last["balance_error_relative"]),
+           "error": abs(float(last["balance_error_relative"]))}
+    sim.close()
+    row = stamp(row, t0, sim)
+    row["steps"] = sim.state.step - step0
+    return row
+
+
+# ============================================================================ 10. long run
 def long_run(n_steps: int = 1_000_000) -> dict:
     """1e6 undamped steps of a small elastic block with glued crack elements released from a
     strained state: the ledger's balance error (drift) relative to the energy held."""
@@ -474,6 +536,8 @@ def sweeps(quick: bool) -> dict:
         "impact": (impact, [dict(size=h, alpha=a, safety=s) for h, a, s in
                             (grid((0.25,), (10, 100), (0.2, 0.4, 0.8)) if q else
                              grid((0.25, 0.125), (10, 100, 1000), (0.2, 0.4, 0.8, 0.99)))]),
+        "runout": (runout, [dict(safety=s) for s in ((0.4, 0.8) if q else (0.2, 0.4, 0.6, 0.8, 0.99))]
+                   + [dict(safety=s, seed=k) for s in (0.4, 0.8) for k in range(2 if q else 4)]),
         "planar": (planar, [dict(size=1.5, alpha=5, safety=0.8)] if q else
                    [dict(size=h, alpha=a, safety=s) for h, a, s in
                     grid((1.5, 1.0), (5, 20), (0.8,)) + grid((1.5,), (5,), (0.5, 0.99))]
@@ -512,7 +576,8 @@ def run_problem(name: str, quick: bool) -> list[dict]:
             rows.append(r)
             show = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in r.items()
                     if k in ("h", "alpha", "safety", "angle_deg", "G_I", "tangential_ratio", "error", "wall_s",
-                             "steps", "ratio", "settlement_error", "error_signed", "damaged_at_peak")}
+                             "steps", "ratio", "settlement_error", "error_signed", "damaged_at_peak",
+                             "seed", "runout_distance_m", "broken_in_runout", "reason")}
             print(name, show, flush=True)
             path.write_text(json.dumps({"quick": quick, "rows": rows}, indent=1))
     path.write_text(json.dumps({"quick": quick, "rows": rows}, indent=1))
@@ -593,10 +658,12 @@ TITLES = {
     "incline": "block on incline: slide at 1 s",
     "impact": "two-body impact: max total-energy error",
     "planar": "planar slope: |FoS / Hoek-Bray - 1|",
+    "runout": "demo slope runout to rest: |ledger balance error|",
 }
 
-COLUMNS = ["h", "alpha", "safety", "angle_deg", "G_I", "tangential_ratio", "error", "error_signed", "ratio",
-           "settlement_error", "damaged_at_peak", "fos", "dt_s", "steps", "wall_s", "loadavg"]
+COLUMNS = ["h", "alpha", "safety", "angle_deg", "G_I", "tangential_ratio", "seed", "error", "error_signed", "ratio",
+           "settlement_error", "damaged_at_peak", "fos", "runout_distance_m", "displaced_area_m2", "broken_in_runout",
+           "runout_time_s", "reason", "dt_s", "steps", "wall_s", "loadavg"]
 
 
 def fmt(v) -> str:
@@ -631,7 +698,8 @@ def tables(names) -> Path:
     return out
 
 
-ALL = ["wave", "column", "mode1", "brazilian", "direction", "incline", "impact", "planar", "tangential", "longrun"]
+ALL = ["wave", "column", "mode1", "brazilian", "direction", "incline", "impact", "runout", "planar", "tangential",
+       "longrun"]
 
 
 def main(argv=None):
