@@ -525,3 +525,30 @@ def test_compression_matched_to_contact_hands_over_the_same_force():
     # Stored energy agrees as well: 0.5 k_c d^2 L against the pair's potential energy.
     e_contact, _, _, _ = pair_energy_force(x[a], x[b], p_contact)
     assert cs.energy_terms()["crack_elastic"] == pytest.approx(e_contact, rel=0.01)
+
+
+def test_an_element_folded_open_about_its_intact_end_breaks():
+    """Triangle B swung open about end 1 (held together: intact there) like a book: end 0
+    opens far beyond the critical opening, end 1 stays at zero separation. The element's
+    mid-line frame degenerates as the faces fold towards 180 degrees (|m| -> 0), which once
+    turned a free opening into a huge closure and blew up a runout. The element must break
+    once its faces have turned more than 90 degrees apart, and hold no energy on the way."""
+    topo = two_triangles()
+    cs = CrackSet(topo, {0: props()})
+    cn = topo.crack_nodes[0]
+    b_nodes = np.arange(3, 6)                    # triangle B's exploded nodes
+    hinge = topo.x0[cn[2]]
+    energy, alive_at = [], []
+    for step, deg in enumerate(np.linspace(0.0, 179.0, 180)):
+        th = math.radians(deg)
+        R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+        x = topo.x0.copy()
+        x[b_nodes] = (topo.x0[b_nodes] - hinge) @ R.T + hinge
+        f = np.zeros_like(x)
+        cs.add_forces(x, None, f, 1e-4, step)
+        energy.append(cs.energy_terms()["crack_elastic"])
+        alive_at.append(deg if cs.n_active else None)
+    last_alive = max(d for d in alive_at if d is not None)
+    assert 85.0 <= last_alive <= 91.0
+    assert cs.broken[0] and len(cs.events) == 1
+    assert max(energy) < 1e-9 * props().f_t ** 2 / KN * L

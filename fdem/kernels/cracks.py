@@ -272,7 +272,9 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
 
     Returns ``(broke, F0x, F0y, F1x, F1y)``: ``F_i = sigma_i n + tau_i t`` [N/m] is the force on
     the A node of end ``i``; the B node gets ``-F_i``. ``broke`` is True when both ends reached
-    ``D >= 1`` in this update (forces are then zero: the faces belong to contact).
+    ``D >= 1`` in this update, or when the faces of an inelastic element have turned more than
+    90 degrees apart (``(x1 - x0) . (x2 - x3) <= 0``: hinged open about one end); forces are then
+    zero and the faces belong to contact.
     """
     i0 = nodes[c, 0]
     i1 = nodes[c, 1]
@@ -356,7 +358,13 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
         diss[c, 0] += wI0 + wI1
         diss[c, 1] += wII0 + wII1
         diss[c, 2] += wf0 + wf1
-        broke = Dn0 >= 1.0 and Dn1 >= 1.0
+        # Faces turned more than 90 degrees apart (face A along x1 - x0, face B along x2 - x3,
+        # parallel at the reference): the element only hinges on one end, which in this law is
+        # a frictionless pin, and its mid-line frame degenerates as the fold nears 180 degrees
+        # (|m| -> 0 flips n, turning a free opening into a huge closure). It breaks; its
+        # faces belong to contact from here on.
+        folded = (x1 - x0) * (x2 - x3) + (y1 - y0) * (y2 - y3) <= 0.0
+        broke = (Dn0 >= 1.0 and Dn1 >= 1.0) or folded
     keep = 0.0 if broke else 1.0
     F0x = keep * (sig0 * nx + tau0 * tx)
     F0y = keep * (sig0 * ny + tau0 * ty)
