@@ -211,14 +211,10 @@ def brazilian(divisions: int, alpha: float = 10.0, safety: float = 0.8, angle_de
     optional fracture energy. Records the peak-load strength ratio, the process-zone length
     ``l_pz = E G_I / f_t^2`` and how many crack elements were damaged at the peak."""
     b = load_case("brazilian_disc")
-    from fdem.geometry import disc
-
     t0 = time.perf_counter()
     G_I = b.G_I if G_I is None else G_I
     R = b.DIAMETER / 2
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        mesh = mesh_model(Geometry([disc((0.0, 0.0), R, n_sides=96)]), b.DIAMETER / divisions, algorithm="delaunay")
+    mesh = b.disc_mesh(divisions)
     a = math.radians(angle_deg)
     rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
     mesh = dataclasses.replace(mesh, points=np.ascontiguousarray(mesh.points @ rot.T))
@@ -524,7 +520,7 @@ def sweeps(quick: bool) -> dict:
                            grid((0.1, 0.05, 0.025), (1, 10, 100), (0.8,)) + grid((0.05,), (10,), (0.3, 0.5, 0.99)))]),
         "brazilian": (brazilian, [dict(divisions=d, alpha=a, safety=s) for d, a, s in
                                   (grid((25, 35), (10,), (0.8,)) if q else
-                                   grid((25, 40, 60), (10,), (0.8,)) + grid((25,), (30, 100), (0.8,))
+                                   grid((25, 40, 60, 80), (10,), (0.8,)) + grid((25,), (30, 100), (0.8,))
                                    + grid((25,), (10,), (0.5, 0.99)))]),
         "direction": (brazilian, [dict(divisions=d, angle_deg=a, G_I=g) for d, a, g in
                                   (grid((25,), (0.0, 30.0, 60.0), (None,)) if q else
