@@ -365,35 +365,30 @@ def _apart_on(axis, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
     The same strict expressions as :func:`_sat_axis` for that one axis (its three ``u_ij`` or
     ``v_kj`` and the ``2A`` they are measured against), so "apart" here is bit for bit the
     verdict of the full test: 5 orientation determinants instead of 18. Pairs of a settled pile
-    or of neighbouring blocks stay apart on the same axis for many steps.
+    or of neighbouring blocks stay apart on the same axis for many steps. c's edges are t's with
+    the roles swapped: ``v_kj(c, t) = u_kj(t, c)`` exactly (both differences change sign).
     """
     if axis <= 3:
-        # t's edge j, from t_{j+1} to t_{j+2}; u_ij = (t_{j+1} - c_i) x (t_{j+2} - c_i)
-        if axis == 1:
-            ax, ay, bx, by = t1x, t1y, t2x, t2y
-        elif axis == 2:
-            ax, ay, bx, by = t2x, t2y, t0x, t0y
-        else:
-            ax, ay, bx, by = t0x, t0y, t1x, t1y
-        thr = TOUCH_EPS * (_orient(t1x - c0x, t1y - c0y, t2x - c0x, t2y - c0y)
-                           + _orient(t2x - c0x, t2y - c0y, t0x - c0x, t0y - c0y)
-                           + _orient(t0x - c0x, t0y - c0y, t1x - c0x, t1y - c0y))
-        return _max3(_orient(ax - c0x, ay - c0y, bx - c0x, by - c0y),
-                     _orient(ax - c1x, ay - c1y, bx - c1x, by - c1y),
-                     _orient(ax - c2x, ay - c2y, bx - c2x, by - c2y)) <= thr
-    # c's edge j, from c_{j+1} to c_{j+2}; v_kj = (t_k - c_{j+1}) x (t_k - c_{j+2})
-    if axis == 4:
-        ax, ay, bx, by = c1x, c1y, c2x, c2y
-    elif axis == 5:
-        ax, ay, bx, by = c2x, c2y, c0x, c0y
+        return _apart_on_edge_of_t(axis - 1, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y)
+    return _apart_on_edge_of_t(axis - 4, t0x, t0y, t1x, t1y, t2x, t2y, c0x, c0y, c1x, c1y, c2x, c2y)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _apart_on_edge_of_t(j, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
+    """``max_i u_ij <= TOUCH_EPS 2A_t`` for t's edge ``j`` (from ``t_{j+1}`` to ``t_{j+2}``),
+    ``u_ij = (t_{j+1} - c_i) x (t_{j+2} - c_i)``, ``2A_t = u_00 + u_01 + u_02``."""
+    if j == 0:
+        ax, ay, bx, by = t1x, t1y, t2x, t2y
+    elif j == 1:
+        ax, ay, bx, by = t2x, t2y, t0x, t0y
     else:
-        ax, ay, bx, by = c0x, c0y, c1x, c1y
-    thr = TOUCH_EPS * (_orient(t0x - c1x, t0y - c1y, t0x - c2x, t0y - c2y)
-                       + _orient(t0x - c2x, t0y - c2y, t0x - c0x, t0y - c0y)
-                       + _orient(t0x - c0x, t0y - c0y, t0x - c1x, t0y - c1y))
-    return _max3(_orient(t0x - ax, t0y - ay, t0x - bx, t0y - by),
-                 _orient(t1x - ax, t1y - ay, t1x - bx, t1y - by),
-                 _orient(t2x - ax, t2y - ay, t2x - bx, t2y - by)) <= thr
+        ax, ay, bx, by = t0x, t0y, t1x, t1y
+    thr = TOUCH_EPS * (_orient(t1x - c0x, t1y - c0y, t2x - c0x, t2y - c0y)
+                       + _orient(t2x - c0x, t2y - c0y, t0x - c0x, t0y - c0y)
+                       + _orient(t0x - c0x, t0y - c0y, t1x - c0x, t1y - c0y))
+    return _max3(_orient(ax - c0x, ay - c0y, bx - c0x, by - c0y),
+                 _orient(ax - c1x, ay - c1y, bx - c1x, by - c1y),
+                 _orient(ax - c2x, ay - c2y, bx - c2x, by - c2y)) <= thr
 
 
 @njit(cache=True, error_model="numpy", inline="always")
