@@ -36,6 +36,21 @@ def test_stage_rules_are_checked_before_anything_runs():
     with pytest.raises(ValueError, match="damping"):
         Stage("x", duration=1.0, damping=0.8)
     assert reduction_steps(0.3) == pytest.approx([1 / 0.9, 1 / 0.8, 1 / 0.7, 1 / 0.6, 1 / 0.5, 1 / 0.4, 1 / 0.3])
+    with pytest.raises(ValueError, match="time-step factor"):
+        Stage("x", duration=1.0, safety=1.5)
+
+
+def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
+    s = scene()
+    crit, _ = s.sim.critical_dt()
+    T = response_time(s.sim.model)
+    r = run_stage(s.sim, Stage("fine", duration=0.05 * T, safety=0.4, damping=fundamental_damping(s.sim)),
+                  frames=False)
+    assert r.dt == pytest.approx(0.4 * crit) and s.sim.safety == 0.8
+    assert r.steps == pytest.approx(0.05 * T / (0.4 * crit), abs=1)
+    r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim)), frames=False)
+    assert r.dt == pytest.approx(0.8 * crit)
+    assert SlopeWorkflow().runout_safety == 0.4
 
 
 def test_static_start_converges_and_a_weak_slope_fails():

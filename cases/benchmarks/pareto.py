@@ -451,13 +451,12 @@ def runout(safety: float, seed: int | None = None, kick: float = 1e-6) -> dict:
     load_checkpoint(sim, start)
     t0 = time.perf_counter()   # the runout alone
     step0 = sim.state.step
-    sim.safety = safety
-    sim.dt = sim._choose_dt()
     if seed is not None:
         sim.state.v += kick * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
     topo = sim.model.topology
     t_start, broken0 = sim.state.time, int(cracks.broken.sum())
-    res = run_stage(sim, runout_stage(SlopeWorkflow(), response_time(sim.model), float(np.ptp(topo.x0[:, 1])),
+    res = run_stage(sim, runout_stage(SlopeWorkflow(runout_safety=safety), response_time(sim.model),
+                                      float(np.ptp(topo.x0[:, 1])),
                                       float(np.linalg.norm(sim.gravity))), frames=False)
     toe_x, _ = slope_toe(geo.bodies[0])
     fig = runout_figures(topo, sim.state.x, toe_x)
