@@ -461,7 +461,8 @@ def runout(safety: float, seed: int | None = None, kick: float = 1e-6) -> dict:
     toe_x, _ = slope_toe(geo.bodies[0])
     fig = runout_figures(topo, sim.state.x, toe_x)
     last = sim.history[-1]
-    row = {"problem": "runout", "h": quick_start.SIZE, "alpha": None, "safety": safety, "seed": seed,
+    row = {"problem": "runout", "h": quick_start.SIZE, "alpha": quick_start.PENALTY / quick_start.YOUNG,
+           "safety": safety, "seed": seed,
            "kick_m_s": kick if seed is not None else 0.0, "n_triangles": topo.n_triangles, "reason": res.reason,
            "runout_time_s": sim.state.time - t_start, "runout_distance_m": fig["runout_distance_m"],
            "displaced_area_m2": fig["displaced_area_m2"], "broken": int(cracks.broken.sum()),
