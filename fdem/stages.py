@@ -30,6 +30,7 @@ Dawson, Roth & Drescher 1999). Bisection narrows ``[stable, failing]`` to the to
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -268,9 +269,13 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
     length = stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T)
     sim_safety = sim.safety
-    if stage.safety is not None:
-        sim.safety = stage.safety
-    sim.dt = sim._choose_dt()
+    try:
+        if stage.safety is not None:
+            sim.safety = stage.safety
+        sim.dt = sim._choose_dt()
+    except ValueError:
+        sim.safety = sim_safety
+        raise
     dt = sim.dt
     check_steps = max(1, int(round((stage.check_interval or T / 40.0) / dt)))
     output_steps = max(1, int(round((stage.output_interval or length / 4.0) / dt)))
@@ -459,9 +464,8 @@ def default_trial_stage(sim: Simulation) -> Stage:
 
 
 def _trial_stage_at(trial: Stage, factor: float) -> Stage:
-    return Stage(f"{trial.name}_F{factor:.4f}", duration=trial.duration, max_time=trial.max_time,
-                 converge=trial.converge, fail=trial.fail, damping=trial.damping, hold_elastic=trial.hold_elastic,
-                 check_interval=trial.check_interval, monitor=trial.monitor)
+    return dataclasses.replace(trial, name=f"{trial.name}_F{factor:.4f}", reduction=None, reduction_ramp=None,
+                               gravity_factor=None)
 
 
 def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[Trial, dict | None]:

@@ -51,6 +51,21 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim)), frames=False)
     assert r.dt == pytest.approx(0.8 * crit)
     assert SlopeWorkflow().runout_safety == 0.4
+    # a user step above the critical one is refused, and the simulation keeps its own factor
+    s.sim.user_dt = 2.0 * crit
+    with pytest.raises(ValueError, match="exceeds the stable time step"):
+        run_stage(s.sim, Stage("too_big", duration=0.05 * T, safety=0.4), frames=False)
+    assert s.sim.safety == 0.8
+    s.sim.user_dt = None
+
+
+def test_a_trial_stage_keeps_its_time_step_factor():
+    from fdem.stages import _trial_stage_at
+
+    trial = Stage("trial", max_time=1.0, converge=Convergence(), safety=0.4, output_interval=0.1, reduction=2.0)
+    at = _trial_stage_at(trial, 1.5)
+    assert at.name == "trial_F1.5000" and at.safety == 0.4 and at.output_interval == 0.1
+    assert at.reduction is None   # the trigger sets the factor, not the stage
 
 
 def test_static_start_converges_and_a_weak_slope_fails():
