@@ -49,14 +49,15 @@ PENALTY = 10 * YOUNG  # Pa, Munjiza p = alpha E with alpha = 10
 def disc_mesh(divisions: float, algorithm: str = "delaunay"):
     """The disc meshed at element size ``D / divisions``.
 
-    Its polygon's sides are about one element long (``ceil(pi D / size)`` sides, at least 24):
+    Its polygon's sides are about one element long (``ceil(pi D / size)`` sides rounded up to a
+    multiple of 4, so that corners sit on the loaded diameter at both platens; at least 24):
     the element size inside follows the boundary's (Gmsh extends sizes from the boundary), so
     shorter sides would refine the whole disc and longer ones are split into pieces shorter
     than the element size. A fixed 96-gon (3.3 mm sides) made D/15 and D/25 both about D/31
     (1,954 triangles each) and D/40 and D/60 both about D/61 (7,702 and 7,726).
     """
     size = DIAMETER / divisions
-    n_sides = max(24, int(np.ceil(np.pi * DIAMETER / size)))
+    n_sides = max(24, 4 * int(np.ceil(np.pi * DIAMETER / size / 4.0)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return mesh_model(Geometry([disc((0.0, 0.0), DIAMETER / 2, n_sides=n_sides)]), size, algorithm=algorithm)
