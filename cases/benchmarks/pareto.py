@@ -420,16 +420,30 @@ RUNOUT_DIR = ROOT / "runs" / "pareto_runout"
 
 def runout_start() -> Path:
     """The failed state of the quick-start slope (``fdem demo``) that its runout starts from:
-    made once by running the demo's workflow (``runs/pareto_runout/runout_start.npz``)."""
-    path = RUNOUT_DIR / "runout_start.npz"
-    if not path.exists():
-        from fdem.cases import quick_start
-        from fdem.workflow import SlopeWorkflow, run_slope_workflow
+    made by running the demo's workflow (``runs/pareto_runout/runout_start.npz``), and made again
+    whenever a kernel source has changed since (the digest of ``fdem._kernel_cache`` is kept
+    beside it), so that no sweep starts from a state older kernels produced."""
+    import fdem
+    from fdem._kernel_cache import kernel_sources_digest
 
-        _, sim, _, _ = quick_start.build(quick_start.SIZE, None, progress=False)
-        RUNOUT_DIR.mkdir(parents=True, exist_ok=True)
-        run_slope_workflow(sim, SlopeWorkflow(), out_dir=RUNOUT_DIR)
-        sim.close()
+    path = RUNOUT_DIR / "runout_start.npz"
+    stamp = RUNOUT_DIR / "kernel_sources.sha256"
+    digest = kernel_sources_digest(Path(fdem.__file__).resolve().parent)
+    if path.exists() and stamp.exists() and stamp.read_text().strip() == digest:
+        return path
+    from fdem.cases import quick_start
+    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+
+    path.unlink(missing_ok=True)
+    _, sim, _, _ = quick_start.build(quick_start.SIZE, None, progress=False)
+    RUNOUT_DIR.mkdir(parents=True, exist_ok=True)
+    # the workflow saves the failed state before its runout; a short cap, since only the state is needed
+    result = run_slope_workflow(sim, SlopeWorkflow(runout_time=1e-3), out_dir=RUNOUT_DIR)
+    sim.close()
+    if not path.exists():
+        raise RuntimeError(f"the quick-start slope did not fail (outcome {result['outcome']!r}): "
+                           f"no runout state to sweep; see {RUNOUT_DIR}")
+    stamp.write_text(digest)
     return path
 
 
