@@ -10,7 +10,8 @@ al. 2014) lives in :func:`fdem.kernels.cracks.point_law` and is derived in ``doc
   ``G_I`` (total work to open a unit area at zero shear) and ``G_II`` (work of the cohesive
   part of the shear strength; the frictional part ``sigma_n tan(phi)`` is friction);
 * elliptical mixed-mode damage ``D = sqrt(xi_I^2 + xi_II^2)``, never healing; full normal
-  penalty in compression; the element breaks when ``D >= 1`` at both integration points.
+  penalty in compression; the element breaks when ``D >= 1`` at both integration points, or
+  when an inelastic element's faces have turned more than 90 degrees apart (``docs/cohesive.md``).
 
 Integration points: the two end points (node pairs 0-3 and 1-2). Nodal (Lobatto)
 quadrature of an interface element decouples the ends, so each node pair has its own traction
@@ -616,8 +617,10 @@ class CrackSet:
 
         ``x`` (n_nodes, 2) current positions [m]; ``v`` is unused (the law is rate
         independent); ``dt`` [s] and ``step`` time-stamp fracture events (time advances by
-        ``dt`` per new step number). Elements reaching ``D >= 1`` at both ends break: they add
-        no force from this call on, leave the active list and are recorded in :attr:`events`.
+        ``dt`` per new step number). Elements reaching ``D >= 1`` at both ends, or inelastic ones
+        whose faces have turned more than 90 degrees apart, break: they add no force from this
+        call on, leave the active list and are recorded in :attr:`events` (a folded element's
+        damage may stay below 1 at its intact end).
         """
         if self._last_step is None:
             self._time = step * dt

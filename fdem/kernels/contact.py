@@ -364,7 +364,7 @@ def _apart_on(axis, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y):
 
     The same strict expressions as :func:`_sat_axis` for that one axis (its three ``u_ij`` or
     ``v_kj`` and the ``2A`` they are measured against), so "apart" here is bit for bit the
-    verdict of the full test: 5 orientation determinants instead of 18. Pairs of a settled pile
+    verdict of the full test: 6 orientation determinants (3 for ``2A``, 3 for the reach) instead of 18. Pairs of a settled pile
     or of neighbouring blocks stay apart on the same axis for many steps. c's edges are t's with
     the roles swapped: ``v_kj(c, t) = u_kj(t, c)`` exactly (both differences change sign).
     """
