@@ -67,9 +67,23 @@ def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_heig
     ``element_damping``: fraction of critical viscosity of each triangle (0: none).
     """
     size = size or min(block_width, block_height) / 2
+    model, base_nodes, block_nodes = incline_model(theta_deg, 0.25 * base_length, block_width, block_height, size,
+                                                   base_length, element_damping)
+    model.fix(base_nodes)
+    cracks = CrackSet(model.topology, {0: unbreakable(YOUNG)})
+    contact = ContactSet(model.topology, CONTACT_PENALTY, friction_angle=phi_deg, mass=model.node_mass(),
+                         cracks=cracks)
+    return model, cracks, contact, block_nodes
+
+
+def incline_model(theta_deg: float, block_x: float, block_width: float, block_height: float, size: float,
+                  base_length: float, element_damping: float):
+    """A block (body 1, lower-left corner at ``(block_x, 0.5)``) on a 0.5 m thick base plate
+    (body 0) of ``base_length`` [m], meshed at ``size`` [m]; the plane is tilted by turning
+    gravity, ``g (sin theta, -cos theta)``. Returns ``(model, base_nodes, block_nodes)``; the
+    caller supports or shakes the base."""
     base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
-    x0 = 0.25 * base_length
-    block = rectangle(x0, 0.5, block_width, block_height, name="block")
+    block = rectangle(block_x, 0.5, block_width, block_height, name="block")
     topo = build_topology(mesh_model(Geometry([base, block]), size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     if element_damping > 0:
@@ -77,11 +91,8 @@ def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_heig
     th = math.radians(theta_deg)
     model.set_gravity(G * math.sin(th), -G * math.cos(th))
     base_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 0, 3))
-    model.fix(base_nodes)
-    cracks = CrackSet(topo, {0: unbreakable(YOUNG)})
-    contact = ContactSet(topo, CONTACT_PENALTY, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
     block_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 1, 3))
-    return model, cracks, contact, block_nodes
+    return model, base_nodes, block_nodes
 
 
 def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float = 1.0, block_height: float = 1.0,

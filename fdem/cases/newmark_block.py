@@ -19,36 +19,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
+from fdem.cases.block_on_incline import CONTACT_PENALTY, G, YOUNG, incline_model, unbreakable
 from fdem.cases.common import check_common, set_threads
-from fdem.cohesive import CrackProperties, CrackSet
+from fdem.cohesive import CrackSet
 from fdem.contact import ContactSet
-from fdem.geometry import Geometry, rectangle
-from fdem.materials import ElasticMaterial
-from fdem.meshing import mesh_model
-from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
+from fdem.model import DEFAULT_ELEMENT_DAMPING
 from fdem.shaking import AccelerationHistory, newmark_response, shake_base, yield_acceleration
 from fdem.solver import Simulation
-from fdem.topology import build_topology
 
-G = 9.81
-YOUNG, POISSON, DENSITY = 1e9, 0.25, 2700.0
-CONTACT_PENALTY = 20 * YOUNG  # Pa: p = alpha E, alpha = 20
 THETA, PHI = 20.0, 30.0       # deg: a_y = 1.967 m/s^2
 AMPLITUDE_RATIO = 2.0         # A / a_y
 PERIOD = 1.0                  # s
 T_SETTLE = 0.2                # s of gravity alone before the shaking
 SIZES = (0.5, 0.25, 0.125)
-
-
-def unbreakable(young: float) -> CrackProperties:
-    """Crack elements that stay elastic: strengths far above any stress in this scene."""
-    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e15, G_II=1e15, p_n=10 * young)
 
 
 def pulse(theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO, period: float = PERIOD,
@@ -63,19 +51,11 @@ def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float
           penalty: float = CONTACT_PENALTY):
     """Model, providers, block node ids and base node ids; the base shaken by ``history`` along x.
     ``penalty`` [Pa]: contact penalty."""
-    base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
-    block = rectangle(0.5 * base_length - 0.5, 0.5, 1.0, 1.0, name="block")
-    topo = build_topology(mesh_model(Geometry([base, block]), size))
-    model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
-    if element_damping > 0:
-        model.set_element_damping(element_damping)
-    th = math.radians(theta_deg)
-    model.set_gravity(G * math.sin(th), -G * math.cos(th))
-    base_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 0, 3))
-    block_nodes = np.flatnonzero(np.repeat(topo.triangle_body == 1, 3))
+    model, base_nodes, block_nodes = incline_model(theta_deg, 0.5 * base_length - 0.5, 1.0, 1.0, size, base_length,
+                                                   element_damping)
     shake_base(model, base_nodes, history, components="xy")  # x: the history; y: held (a_y = 0)
-    cracks = CrackSet(topo, {0: unbreakable(YOUNG)})
-    contact = ContactSet(topo, penalty, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
+    cracks = CrackSet(model.topology, {0: unbreakable(YOUNG)})
+    contact = ContactSet(model.topology, penalty, friction_angle=phi_deg, mass=model.node_mass(), cracks=cracks)
     return model, [cracks, contact], block_nodes, base_nodes
 
 
