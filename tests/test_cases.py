@@ -82,8 +82,14 @@ def check_json(path: Path) -> object:
     return data
 
 
+LEDGER_TOLERANCE = 1e-3
+"""Largest |balance error| / energy moved a smoke run may show: energy is conserved (the work of
+gravity, supports and dissipation booked), so the ledger closes whatever the scene."""
+
+
 def check_history(path: Path) -> int:
-    """Every numeric cell of a history CSV is finite; returns the number of rows."""
+    """Every numeric cell of a history CSV is finite, and the energy ledger closes in every row
+    (energy conservation, the one physical fact every scene shares); returns the number of rows."""
     with path.open() as f:
         rows = list(csv.DictReader(f))
     assert rows, f"{path} has no rows"
@@ -94,6 +100,9 @@ def check_history(path: Path) -> int:
                 continue
             values.append(float(cell))
     assert np.all(np.isfinite(values)), f"{path}: non-finite values"
+    if "balance_error_relative" in rows[0]:
+        worst = max(abs(float(r["balance_error_relative"])) for r in rows)
+        assert worst < LEDGER_TOLERANCE, f"{path}: the energy ledger is off by {worst:.3g} of the energy moved"
     return len(rows)
 
 
