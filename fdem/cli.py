@@ -14,9 +14,11 @@ import argparse
 import sys
 from pathlib import Path
 
+__all__ = ["main"]
+
 
 def _list(args) -> int:
-    from .cases import CASES, describe
+    from fdem.cases import CASES, describe
 
     width = max(len(n) for n in CASES)
     for name in CASES:
@@ -26,8 +28,8 @@ def _list(args) -> int:
 
 def _run_case(name: str, argv: list[str]) -> int:
     # --threads must reach NUMBA_NUM_THREADS before any kernel module imports numba
-    from .cases import case_module
-    from .cases.common import set_threads
+    from fdem.cases import case_module
+    from fdem.cases.common import set_threads
 
     for i, a in enumerate(argv):
         if a == "--threads" and i + 1 < len(argv) and argv[i + 1].isdigit():
@@ -52,9 +54,9 @@ def _demo(args) -> int:
 
 
 def _info(args) -> int:
-    from .mesh import Mesh
-    from .meshing import quality_report
-    from .topology import build_topology
+    from fdem.mesh.mesh import Mesh
+    from fdem.mesh.quality import quality_report
+    from fdem.mesh.topology import build_topology
 
     mesh = Mesh.load(args.mesh)
     topo = build_topology(mesh)

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from fdem.kernels.contact import (CLOSE_TOL, FASTMATH, MAX_VERT, N_COL, N_IWORK, N_WORK, _NONE,  # noqa: F401
-                                  _corners, _line_integrals, _overlap_clip, _sat)
+from fdem.kernels.contact_pairs import (CLOSE_TOL, FASTMATH, MAX_VERT, N_COL, N_IWORK, N_WORK, _NONE, _corners, _line_integrals, _overlap_clip, _sat)
 
 
 

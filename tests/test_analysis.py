@@ -3,10 +3,9 @@ fragments. Scenes with known answers: a block of an exploded mesh moved rigidly 
 import numpy as np
 import pytest
 
-from fdem.analysis import (deposit_profile, displacement_statistics, failure_surface, fragment_statistics,
-                           history_columns, runout, weighted_percentile)
-from fdem.mesh import structured_rectangle
-from fdem.topology import build_topology
+from fdem.results.analysis import (deposit_profile, displacement_statistics, failure_surface, fragment_statistics, history_columns, runout, weighted_percentile)
+from fdem.mesh.mesh import structured_rectangle
+from fdem.mesh.topology import build_topology
 
 # A 40 m x 10 m body of 1 m cells (2 triangles of 0.5 m^2 each); toe at x = 0, runout toward -x.
 TOPO = build_topology(structured_rectangle(40, 10, 40.0, 10.0))

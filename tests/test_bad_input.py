@@ -6,11 +6,14 @@ import warnings
 import numpy as np
 import pytest
 
-from fdem.geometry import Geometry, PersistentSet, SegmentSet, rectangle
-from fdem.geometry import CoincidentJointsWarning
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import ConformingTopology, Model
+from fdem.geometry.section import Geometry
+from fdem.geometry.joint_sets import PersistentSet, SegmentSet
+from fdem.geometry.polygons import rectangle
+from fdem.geometry.dfn import CoincidentJointsWarning
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import structured_rectangle
+from fdem.mesh.topology import ConformingTopology
+from fdem.solve.model import Model
 
 ROCK = dict(young=1e9, poisson=0.25, density=2700.0)
 

@@ -13,14 +13,15 @@ import os
 import numpy as np
 import pytest
 
-from fdem import checkpoint as ck
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import Model
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.solve import checkpoint as ck
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
 
 HALF = 150
 EVERY = 10

@@ -12,11 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from fdem.cohesive import (CrackProperties, CrackSet, Heterogeneity, four_slope_property_sets,
-                           softening_integral, softening_max_slope)
+from fdem.physics.crack_properties import CrackProperties, softening_integral, softening_max_slope
+from fdem.physics.cracks import CrackSet
+from fdem.physics.heterogeneity import Heterogeneity
+from fdem.cases.four_slopes import four_slope_property_sets
 from fdem.kernels import cracks as K
-from fdem.mesh import Mesh, structured_rectangle
-from fdem.topology import build_topology
+from fdem.mesh.mesh import Mesh, structured_rectangle
+from fdem.mesh.topology import build_topology
 
 L = 0.5  # crack element length [m]
 KN = 1.0e12  # normal stiffness per unit area [Pa/m]
@@ -470,8 +472,8 @@ def test_elastic_energy_and_stable_dt():
 
 
 def test_held_elastic_elements_neither_damage_nor_break():
-    from fdem.mesh import structured_rectangle
-    from fdem.topology import build_topology
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
 
     topo = build_topology(structured_rectangle(1, 1, 1.0, 1.0, diagonal="right"))
     p = CrackProperties(f_t=1e6, c=2e6, phi=30, G_I=100.0, G_II=1000.0, p_n=1e10)
@@ -499,9 +501,9 @@ def test_held_elastic_elements_neither_damage_nor_break():
 def test_compression_matched_to_contact_hands_over_the_same_force():
     """With ``contact_penalty`` set, a compressed element pushes back as contact would after it
     breaks: same normal force for the same flat penetration (no jump at breakage)."""
-    from fdem.contact import pair_energy_force
-    from fdem.mesh import structured_rectangle
-    from fdem.topology import build_topology
+    from fdem.physics.contact import pair_energy_force
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
 
     topo = build_topology(structured_rectangle(1, 1, 1.0, 1.0, diagonal="right"))
     p_contact = 5e9

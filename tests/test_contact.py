@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from fdem.contact import (ContactSet, brute_force_candidate_pairs, candidate_pairs,
-                          pair_energy_force)
-from fdem.kernels import contact as fcontact_kernels
-from fdem.mesh import Mesh, structured_rectangle
-from fdem.topology import build_topology
+from fdem.physics.contact import ContactSet, brute_force_candidate_pairs, candidate_pairs, pair_energy_force
+from fdem.kernels import contact_pairs as fcontact_kernels
+from fdem.mesh.mesh import Mesh, structured_rectangle
+from fdem.mesh.topology import build_topology
 
 RNG = np.random.default_rng(20240605)
 

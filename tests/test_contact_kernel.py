@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdem.kernels import contact as kc
+from fdem.kernels import contact_pairs as kc
 
 import contact_oracle  # noqa: E402  (tests/contact_oracle.py)
-from fdem.mesh import structured_rectangle
-from fdem.topology import build_topology
+from fdem.mesh.mesh import structured_rectangle
+from fdem.mesh.topology import build_topology
 
 
 def _ccw_triangle(rng, centre, size):

@@ -12,15 +12,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fdem import contact as fc
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.kernels import contact as kc
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import Model
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.physics import contact as fc
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.kernels import contact_pairs as kc
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
 
 STEPS = 400
 

@@ -7,11 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.materials import (ElasticMaterial, critical_viscosity, critical_viscosity_equilateral, elasticity_matrix,
-                            plane_lame_constants, smallest_altitude, triangle_critical_dt, triangle_shape_gradients)
-from fdem.mesh import structured_rectangle
-from fdem.model import DEFAULT_ELEMENT_DAMPING, ConformingTopology, Model
-from fdem.solver import Simulation
+from fdem.physics.elastic import ElasticMaterial, elasticity_matrix, plane_lame_constants
+from fdem.physics.stability import critical_viscosity, critical_viscosity_equilateral, triangle_critical_dt
+from fdem.mesh.triangles import smallest_altitude, triangle_shape_gradients
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import DEFAULT_ELEMENT_DAMPING, Model
+from fdem.mesh.topology import ConformingTopology
+from fdem.solve.simulation import Simulation
 
 CASE = Path(__file__).resolve().parents[1] / "cases" / "block_on_incline.py"
 spec = importlib.util.spec_from_file_location("block_on_incline", CASE)

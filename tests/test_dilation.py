@@ -12,7 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from fdem.cohesive import CrackProperties, CrackSet
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
 from test_cohesive import KN, KT, Driver, props, two_triangles
 
 PSI = 10.0  # dilation angle [deg]

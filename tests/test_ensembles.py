@@ -16,8 +16,9 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
 
-from fdem.ensembles import (TABLE, Distribution, Ensemble, local_cluster, read_table, run_ensemble, summarize,
-                            wilson_interval)
+from fdem.io.ensemble_table import TABLE, read_table
+from fdem.workflow.ensembles import Distribution, Ensemble, local_cluster, run_ensemble
+from fdem.results.ensemble_summary import summarize, wilson_interval
 
 HEIGHT = 10.0
 GEOMETRY = dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=None)
@@ -37,12 +38,12 @@ class CountingPlanarScene:
     def __call__(self, cohesion: float, friction_angle: float):
         from planar_failure import planar_failure_simulation
 
-        from fdem.scenes import planar_slope_model
+        from fdem.cases.planar_failure import planar_slope_geometry
 
         Path(self.marker_dir, f"{os.getpid()}_{time.time_ns()}").touch()
         if cohesion > self.fail_above:
             raise RuntimeError(f"injected failure at cohesion {cohesion:.1f} Pa")
-        return planar_failure_simulation(planar_slope_model(HEIGHT, **GEOMETRY), self.size, cohesion=cohesion,
+        return planar_failure_simulation(planar_slope_geometry(HEIGHT, **GEOMETRY), self.size, cohesion=cohesion,
                                          friction_angle=friction_angle)
 
 
@@ -57,7 +58,7 @@ PARAMETERS = {"cohesion": Distribution.uniform(12e3, 28e3),
 
 def hoek_bray(cohesion: float, friction_angle: float) -> float:
     """Hoek-Bray factor of safety of the dry planar slope (gamma = 25 kN/m^3)."""
-    from fdem.limit_equilibrium import planar_fos
+    from fdem.reference.hoek_bray import planar_fos
 
     return planar_fos(HEIGHT, GEOMETRY["face_angle"], GEOMETRY["plane_angle"], cohesion, friction_angle,
                       25e3).fos

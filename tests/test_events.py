@@ -6,9 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from fdem.cohesive import EVENT_DTYPE
-from fdem.events import (MULIASHI, b_value, cluster_events, compare_with_reference, magnitude_frequency,
-                         magnitude_statistics, max_curvature_mc, moment_magnitude, seismic_moment, write_catalogue_csv)
+from fdem.physics.cracks import EVENT_DTYPE
+from fdem.results.events import (MULIASHI, b_value, cluster_events, compare_with_reference, magnitude_frequency, magnitude_statistics, max_curvature_mc, moment_magnitude, seismic_moment, write_catalogue_csv)
 
 MU, RHO, DSIGMA = 1.0e9, 2500.0, 1.0e5  # c_s = 632 m/s
 

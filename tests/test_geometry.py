@@ -5,9 +5,10 @@ import warnings
 import numpy as np
 import pytest
 
-from fdem.geometry import (BrickSet, Geometry, IntermittentSet, PersistentSet, Polygon, SegmentSet,
-                           StochasticSet, benched_slope, merge_collinear, rectangle, simple_slope,
-                           split_at_crossings)
+from fdem.geometry.joint_sets import BrickSet, IntermittentSet, PersistentSet, SegmentSet, StochasticSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import Polygon, benched_slope, rectangle, simple_slope
+from fdem.geometry.dfn import merge_collinear, split_at_crossings
 
 
 def test_simple_slope_shape_and_area():
@@ -195,7 +196,7 @@ def test_vertices_near_the_boundary_are_snapped_onto_it():
 def test_four_slope_joint_offset_places_the_persistent_joints_relative_to_the_toe():
     """Offset 0 puts a persistent joint through the toe (the fine models, and the coarse ones on
     request); the coarse default 0.5 puts the toe midway between two persistent joints."""
-    from fdem.scenes import four_slope_model
+    from fdem.cases.four_slopes import four_slope_geometry
 
     toe = np.array([45.0, 15.0])
     dip = np.radians(15.0)
@@ -203,7 +204,7 @@ def test_four_slope_joint_offset_places_the_persistent_joints_relative_to_the_to
     for spacing, offset, expect in (("coarse", 0.0, 0.0), ("fine", None, 0.0), ("coarse", None, 2.5)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            dfn = four_slope_model("low", spacing, joint_offset=offset).dfn()
+            dfn = four_slope_geometry("low", spacing, joint_offset=offset).dfn()
         seg = dfn.segments
         d = seg[:, 1] - seg[:, 0]
         u = d / np.linalg.norm(d, axis=1, keepdims=True)
@@ -211,13 +212,13 @@ def test_four_slope_joint_offset_places_the_persistent_joints_relative_to_the_to
         dist = np.abs((seg[persistent, 0] - toe) @ normal)   # distance of each persistent line to the toe
         assert dist.min() == pytest.approx(expect, abs=1e-6), (spacing, offset)
     with pytest.raises(ValueError, match="joint_offset"):
-        four_slope_model("low", "fine", joint_offset=1.5)
+        four_slope_geometry("low", "fine", joint_offset=1.5)
 
 
 def test_muliashi_scene_has_five_rows_of_three_metre_joints():
-    from fdem.scenes import muliashi_model
+    from fdem.cases.muliashi import muliashi_geometry
 
-    dfn = muliashi_model().dfn()
+    dfn = muliashi_geometry().dfn()
     t = np.array([math.cos(math.radians(25)), math.sin(math.radians(25))])
     n = np.array([-t[1], t[0]])
     rows = np.unique(np.round(dfn.segments[:, 0] @ n, 6))
@@ -227,22 +228,9 @@ def test_muliashi_scene_has_five_rows_of_three_metre_joints():
 
 
 def test_disc_area():
-    from fdem.geometry import disc
+    from fdem.geometry.polygons import disc
 
     d = disc((0, 0), 0.5, n_sides=64)
     assert d.area == pytest.approx(32 * 0.25 * math.sin(2 * math.pi / 64), rel=1e-14)
     with pytest.raises(ValueError, match="radius must be positive"):
         disc((0, 0), 0.0)
-
-
-def test_model_is_a_deprecated_alias_of_geometry():
-    import fdem.geometry as geometry
-
-    with pytest.warns(DeprecationWarning, match="use fdem.geometry.Geometry"):
-        alias = geometry.Model
-    assert alias is Geometry
-    with pytest.warns(DeprecationWarning):
-        from fdem.geometry import Model  # noqa: F401  (the old import line keeps working)
-    assert Model([rectangle(0, 0, 2, 1)]).area == pytest.approx(2.0)
-    with pytest.raises(AttributeError, match="no attribute 'Modle'"):
-        geometry.Modle  # noqa: B018

@@ -13,14 +13,14 @@ import warnings
 import numpy as np
 import pytest
 
-from fdem.cohesive import CrackSet, four_slope_property_sets
-from fdem.contact import ContactSet
-from fdem.geostatic import (conforming_static_stress, crack_preload_forces, crack_strength_check, geostatic_start,
-                            preload_residual, unbalanced_force_ratio)
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import FIX_Y, Model, geostatic_stress
-from fdem.solver import Simulation
+from fdem.physics.cracks import CrackSet
+from fdem.cases.four_slopes import four_slope_property_sets
+from fdem.physics.contact import ContactSet
+from fdem.solve.geostatic import (conforming_static_stress, crack_preload_forces, crack_strength_check, geostatic_start, preload_residual, unbalanced_force_ratio)
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import FIX_Y, Model, geostatic_stress
+from fdem.solve.simulation import Simulation
 
 E, NU, RHO, G = 0.59e9, 0.29, 2680.0, 9.81
 H_COL, W_COL = 10.0, 2.0
@@ -95,13 +95,13 @@ def test_uniform_stress_prior_is_exact():
 
 @pytest.fixture(scope="module")
 def slope_topology():
-    from fdem.meshing import mesh_model
-    from fdem.scenes import four_slope_model
-    from fdem.topology import build_topology
+    from fdem.mesh.triangulate import mesh_geometry
+    from fdem.cases.four_slopes import four_slope_geometry
+    from fdem.mesh.topology import build_topology
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        mesh = mesh_model(four_slope_model("low", "coarse"), size=2.5)
+        mesh = mesh_geometry(four_slope_geometry("low", "coarse"), size=2.5)
     return build_topology(mesh)
 
 
@@ -135,9 +135,9 @@ def run_slope(topo, start: str, elastic: bool, periods: float = 1.0):
         report = geostatic_start(model, cracks)
     else:
         import cases.four_slopes as fs
-        from fdem.scenes import four_slope_model
+        from fdem.cases.four_slopes import four_slope_geometry
 
-        surface = fs.ground_surface(four_slope_model("low", "coarse").bodies[0])
+        surface = fs.ground_surface(four_slope_geometry("low", "coarse").bodies[0])
         model.set_initial_stress(geostatic_stress(RHO, G, surface=surface, poisson=NU))
         report = None
     if elastic:

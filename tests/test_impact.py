@@ -4,14 +4,16 @@ penalties from 10 E to 1000 E."""
 import numpy as np
 import pytest
 
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.geometry import Geometry, rectangle
-from fdem.materials import ElasticMaterial
-from fdem.meshing import mesh_model
-from fdem.model import Model
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import rectangle
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
 
 E, NU, RHO = 1e9, 0.25, 2500.0
 
@@ -19,7 +21,7 @@ E, NU, RHO = 1e9, 0.25, 2500.0
 @pytest.mark.parametrize("alpha", [10.0, 100.0, 1000.0])
 def test_frictionless_impact_conserves_momentum_and_energy(alpha):
     left, right = rectangle(0.0, 0.0, 1.0, 0.5, "left"), rectangle(1.0, 0.1, 1.0, 0.5, "right")
-    topo = build_topology(mesh_model(Geometry([left, right]), 0.25))
+    topo = build_topology(mesh_geometry(Geometry([left, right]), 0.25))
     model = Model(topo, ElasticMaterial(young=E, poisson=NU, density=RHO))
     body = np.repeat(topo.triangle_body, 3)
     model.set_initial_velocity(vx=2.0, where=np.flatnonzero(body == 0))

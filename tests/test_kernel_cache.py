@@ -1,6 +1,6 @@
 """The kernel cache is dropped when any kernel source changes (fdem/_kernel_cache.py): Numba's
 own check looks only at the file of the function it loads, not at helpers in other files."""
-from fdem._kernel_cache import STAMP, kernel_sources_digest, refresh_kernel_cache
+from fdem.kernels.cache import STAMP, kernel_sources_digest, refresh_kernel_cache
 
 
 def _package(tmp_path):

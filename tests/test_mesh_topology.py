@@ -7,10 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.geometry import BrickSet, Geometry, IntermittentSet, SegmentSet, rectangle, simple_slope
-from fdem.mesh import Mesh, structured_rectangle
-from fdem.meshing import mesh_model, quality_report
-from fdem.topology import build_topology, check_triangles
+from fdem.geometry.joint_sets import BrickSet, IntermittentSet, SegmentSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import rectangle, simple_slope
+from fdem.mesh.mesh import Mesh, structured_rectangle
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.mesh.quality import quality_report
+from fdem.mesh.topology import build_topology
+from fdem.mesh.triangles import check_triangles
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 
@@ -36,7 +40,7 @@ def slope_model():
 def slope_mesh(slope_model):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return mesh_model(slope_model, 0.4)
+        return mesh_geometry(slope_model, 0.4)
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +131,7 @@ def test_boundary_groups_and_node_selection(slope_model, slope_topology):
 def test_same_input_same_mesh(slope_model, slope_mesh):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        again = mesh_model(slope_model, 0.4)
+        again = mesh_geometry(slope_model, 0.4)
     assert np.array_equal(again.points, slope_mesh.points)
     assert np.array_equal(again.triangles, slope_mesh.triangles)
     assert np.array_equal(again.lines, slope_mesh.lines)
@@ -166,8 +170,8 @@ def test_quality_report(slope_mesh):
 
 def test_refinement_near_joints_makes_smaller_edges_there():
     model = Geometry([rectangle(0, 0, 10, 5)], [SegmentSet([[2, 2.5, 8, 2.5]])])
-    coarse = build_topology(mesh_model(model, 0.5))
-    fine = build_topology(mesh_model(model, 0.5, refine_near_joints=0.25, refine_distance=1.0))
+    coarse = build_topology(mesh_geometry(model, 0.5))
+    fine = build_topology(mesh_geometry(model, 0.5, refine_near_joints=0.25, refine_distance=1.0))
     on_joint = lambda t: t.crack_length0[t.crack_tag == 1]
     assert on_joint(fine).mean() < 0.5 * on_joint(coarse).mean()
     assert fine.n_triangles > coarse.n_triangles
@@ -176,7 +180,7 @@ def test_refinement_near_joints_makes_smaller_edges_there():
 def test_two_bodies_share_no_nodes_and_no_crack_elements():
     base = rectangle(0, 0, 6, 1, "incline")
     block = rectangle(2, 1, 1, 1, "block")
-    mesh = mesh_model(Geometry([base, block]), 0.25)
+    mesh = mesh_geometry(Geometry([base, block]), 0.25)
     topo = build_topology(mesh)
     assert set(np.unique(mesh.triangle_body)) == {0, 1}
     used = [set(mesh.triangles[mesh.triangle_body == b].ravel()) for b in (0, 1)]
@@ -191,7 +195,7 @@ def test_two_bodies_share_no_nodes_and_no_crack_elements():
 @pytest.mark.parametrize("size", [0.0, -0.1, float("nan")])
 def test_non_positive_mesh_size(size):
     with pytest.raises(ValueError, match="mesh size must be positive"):
-        mesh_model(Geometry([rectangle(0, 0, 1, 1)]), size)
+        mesh_geometry(Geometry([rectangle(0, 0, 1, 1)]), size)
 
 
 def test_degenerate_and_inverted_triangles_are_named():
@@ -208,7 +212,7 @@ def test_small_angle_warning_names_count_and_worst_angle():
     model = Geometry([rectangle(0, 0, 10, 10)], [SegmentSet([[1, 5, 9, 5], [1, 4.5, 9, 5.3]])])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        mesh_model(model, 1.0)
+        mesh_geometry(model, 1.0)
     messages = [str(w.message) for w in caught]
     assert any("1 joint crossing(s) sharper than 15 deg (worst 5.71 deg)" in m for m in messages), messages
     assert any(re.search(r"\d+ triangle\(s\) have an angle below 10 deg \(worst \d+\.\d+ deg", m)
@@ -224,7 +228,7 @@ def test_structured_rectangle_topology_counts():
 
 
 def test_jittered_rectangle_keeps_area_and_boundary():
-    from fdem.mesh import jittered_rectangle
+    from fdem.mesh.mesh import jittered_rectangle
 
     mesh = jittered_rectangle(6, 5, 3.0, 2.0, amount=0.3, seed=4)
     topo = build_topology(mesh)

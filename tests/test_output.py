@@ -2,11 +2,15 @@
 import numpy as np
 import pytest
 
-from fdem.materials import ElasticMaterial, stable_dt_spring
-from fdem.mesh import structured_rectangle
-from fdem.model import Model
-from fdem.output import load_state, read_history, read_pvd, write_vtu
-from fdem.solver import Damping, InstabilityError, Simulation
+from fdem.physics.elastic import ElasticMaterial
+from fdem.physics.stability import stable_dt_spring
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import Model
+from fdem.io.npz import load_state
+from fdem.io.history import read_history
+from fdem.io.vtk import read_pvd, write_vtu
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import InstabilityError, Simulation
 
 E, NU, RHO = 1e9, 0.25, 2000.0
 

@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
-from fdem.events import MULIASHI
-from fdem.mesh import structured_rectangle
-from fdem.output import PvdSeries, read_pvd, write_vtu
-from fdem.pictures import crack_count_plot, failure_frame, fragment_size_plot, kinetic_energy_plot, magnitude_plot
-from fdem.topology import build_topology
+from fdem.results.events import MULIASHI
+from fdem.mesh.mesh import structured_rectangle
+from fdem.io.vtk import PvdSeries, read_pvd, write_vtu
+from fdem.io.pictures import (crack_count_plot, failure_frame, fragment_size_plot, kinetic_energy_plot)
+from fdem.results.events import magnitude_plot
+from fdem.mesh.topology import build_topology
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 TOPO = build_topology(structured_rectangle(20, 10, 20.0, 10.0))
@@ -99,7 +100,7 @@ def test_compressed_vtu_reads_back_exactly_through_meshio_and_pyvista(tmp_path, 
     import meshio
     import pyvista as pv
 
-    import fdem.output as out
+    import fdem.io.vtk as out
 
     topo, x, point, cell = frame_arrays()
     raw = write_vtu(tmp_path / "raw.vtu", x, topo.triangles, point_data=point, cell_data=cell)

@@ -6,11 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from fdem.limit_equilibrium import (critical_tension_crack, crack_depth_from_offset, crack_offset_from_depth,
-                                    planar_fos)
-from fdem.meshing import mesh_model
-from fdem.scenes import planar_slope_model
-from fdem.topology import build_topology
+from fdem.reference.hoek_bray import (critical_tension_crack, crack_depth_from_offset, crack_offset_from_depth, planar_fos)
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.cases.planar_failure import planar_slope_geometry
+from fdem.mesh.topology import build_topology
 
 # ----------------------------------------------------------------------------- limit equilibrium
 
@@ -111,8 +110,8 @@ def _joint_edges(topo, tag):
 @pytest.mark.parametrize("crack", [None, 2.0])
 def test_joint_daylights_in_the_face_and_reaches_the_surface_or_the_crack(crack):
     H, pf, pp = 10.0, 60.0, 35.0
-    geometry = planar_slope_model(H, pf, pp, tension_crack_offset=crack)
-    mesh = mesh_model(geometry, 1.0)
+    geometry = planar_slope_geometry(H, pf, pp, tension_crack_offset=crack)
+    mesh = mesh_geometry(geometry, 1.0)
     topo = build_topology(mesh)
     expected = {"bottom", "left", "right", "surface", "joint_set_1"} | ({"joint_set_2"} if crack else set())
     assert set(mesh.group_names) == expected

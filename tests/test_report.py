@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.analysis import slope_toe
-from fdem.report import RunReport
-from fdem.scenes import planar_slope_model
-from fdem.stages import response_time
-from fdem.workflow import SlopeWorkflow, run_slope_workflow
+from fdem.geometry.polygons import slope_toe
+from fdem.results.report import RunReport
+from fdem.cases.planar_failure import planar_slope_geometry
+from fdem.workflow.stages import response_time
+from fdem.workflow.slope import SlopeWorkflow, run_slope_workflow
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
 import planar_failure as pf  # noqa: E402
@@ -29,7 +29,7 @@ def _finite(obj) -> bool:
 
 
 def test_run_report_after_failure_and_runout(tmp_path):
-    g = planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES["tension_crack"])
+    g = planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES["tension_crack"])
     s = pf.planar_failure_simulation(g, 1.6, out_dir=tmp_path, pictures=False)
     sim = s.sim
     toe_x, _ = slope_toe(g.bodies[0])

@@ -9,15 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.boundaries import QuietBoundary
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.materials import ElasticMaterial
-from fdem.mesh import structured_rectangle
-from fdem.model import Model
-from fdem.shaking import (AccelerationHistory, newmark_displacement, newmark_response,
-                          rectangular_pulse_displacement, shake_base, yield_acceleration)
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.physics.boundaries import QuietBoundary
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import structured_rectangle
+from fdem.solve.model import Model
+from fdem.physics.shaking import AccelerationHistory, shake_base
+from fdem.reference.newmark import (newmark_displacement, newmark_response, rectangular_pulse_displacement, yield_acceleration)
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
 
 E, NU, RHO = 1e9, 0.25, 2700.0
 CASE = Path(__file__).resolve().parents[1] / "cases" / "newmark_block.py"

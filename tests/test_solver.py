@@ -3,10 +3,12 @@
 import numpy as np
 import pytest
 
-from fdem.materials import ElasticMaterial, bar_wave_speed, k0_elastic, stable_dt_spring
-from fdem.mesh import jittered_rectangle, structured_rectangle
-from fdem.model import Model, geostatic_stress
-from fdem.solver import Damping, Simulation
+from fdem.physics.elastic import ElasticMaterial, bar_wave_speed, k0_elastic
+from fdem.physics.stability import stable_dt_spring
+from fdem.mesh.mesh import jittered_rectangle, structured_rectangle
+from fdem.solve.model import Model, geostatic_stress
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import Simulation
 
 E, NU, RHO, G = 1e9, 0.25, 2000.0, 10.0
 
@@ -245,7 +247,7 @@ def test_supports_and_prescribed_velocity_are_respected():
 
 def test_exploded_and_conforming_single_triangle_agree():
     """Without crack elements an exploded triangle is a conforming one: same trajectory."""
-    from fdem.mesh import Mesh
+    from fdem.mesh.mesh import Mesh
 
     mesh = Mesh(points=np.array([[0.0, 0.0], [1.0, 0.1], [0.3, 0.9]]), triangles=np.array([[0, 1, 2]]),
                 triangle_body=np.zeros(1, np.int32))

@@ -14,16 +14,18 @@ import math
 import numpy as np
 import pytest
 
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.geometry import Geometry, rectangle
-from fdem.geostatic import geostatic_start
-from fdem.materials import ElasticMaterial
-from fdem.mesh import Mesh, jittered_rectangle, structured_rectangle
-from fdem.meshing import mesh_model
-from fdem.model import Model
-from fdem.solver import InstabilityError, Simulation
-from fdem.topology import build_topology
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import rectangle
+from fdem.solve.geostatic import geostatic_start
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.mesh import Mesh, jittered_rectangle, structured_rectangle
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.model import Model
+from fdem.solve.simulation import InstabilityError, Simulation
+from fdem.mesh.topology import build_topology
 
 E, NU, RHO = 1e9, 0.25, 2500.0
 
@@ -122,7 +124,7 @@ def test_forced_step_above_critical_stops_with_the_instability_message(tmp_path)
 # ----------------------------------------------------------------------------- impacts and penalties
 def two_blocks(speed, contact_alpha, glue_alpha=10.0, size=0.5, safety=0.8):
     left, right = rectangle(0.0, 0.0, 1.0, 0.5, "left"), rectangle(1.0, 0.1, 1.0, 0.5, "right")
-    topo = build_topology(mesh_model(Geometry([left, right]), size))
+    topo = build_topology(mesh_geometry(Geometry([left, right]), size))
     model = Model(topo, ElasticMaterial(young=E, poisson=NU, density=RHO))
     body = np.repeat(topo.triangle_body, 3)
     model.set_initial_velocity(vx=speed, where=np.flatnonzero(body == 0))
@@ -174,7 +176,7 @@ def test_sudden_mass_fragmentation_of_a_loaded_block():
     over its strength together, a band of elements breaks through (6 of 92 on this
     mesh), hands its faces to contact, and the block below falls. The run
     stays finite and the ledger (released elastic energy included) closes, or the guard stops it."""
-    topo = build_topology(mesh_model(Geometry([rectangle(0.0, 0.0, 1.0, 1.0)]), 0.2))
+    topo = build_topology(mesh_geometry(Geometry([rectangle(0.0, 0.0, 1.0, 1.0)]), 0.2))
     model = Model(topo, ElasticMaterial(E, NU, RHO))
     model.set_gravity(0.0, -9.81)
     model.fix(lambda x, y: y > 1.0 - 1e-9)

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fdem.scenes import planar_slope_model
-from fdem.solver import Damping, NO_DAMPING
-from fdem.stages import Convergence, Failure, Stage, fundamental_damping, response_time, run_stage
-from fdem.workflow import SlopeWorkflow, reduction_steps, run_slope_workflow
+from fdem.cases.planar_failure import planar_slope_geometry
+from fdem.solve.damping import Damping, NO_DAMPING
+from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
+from fdem.workflow.fos import fundamental_damping
+from fdem.workflow.slope import SlopeWorkflow, reduction_steps, run_slope_workflow
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
 import planar_failure as pf  # noqa: E402
@@ -23,7 +24,7 @@ SIZE = 1.6
 
 
 def scene(geometry="no_crack"):
-    return pf.planar_failure_simulation(planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES[geometry]), SIZE)
+    return pf.planar_failure_simulation(planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES[geometry]), SIZE)
 
 
 def test_stage_rules_are_checked_before_anything_runs():
@@ -60,7 +61,7 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
 
 
 def test_a_trial_stage_keeps_its_time_step_factor():
-    from fdem.stages import _trial_stage_at
+    from fdem.workflow.fos import _trial_stage_at
 
     trial = Stage("trial", max_time=1.0, converge=Convergence(), safety=0.4, output_interval=0.1, reduction=2.0)
     at = _trial_stage_at(trial, 1.5)
@@ -118,7 +119,7 @@ def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor()
     gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
     cohesion does not grow with the weight). The gravity-increase search must find it within
     10 %, and the ledger must stay closed while gravity changes under a moving slope."""
-    from fdem.stages import GravityIncrease, factor_of_safety
+    from fdem.workflow.fos import GravityIncrease, factor_of_safety
 
     s = scene()
     sim = s.sim
@@ -142,14 +143,14 @@ def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor()
 def planar_simulation(geometry: str, size: float):
     """Module-level scene builder: worker processes of the parallel search call it."""
     return scene(geometry).sim if size == SIZE else pf.planar_failure_simulation(
-        planar_slope_model(pf.HEIGHT, **pf.GEOMETRIES[geometry]), size).sim
+        planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES[geometry]), size).sim
 
 
 def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibrium(tmp_path):
     """Two worker processes, each restarting its trials from a checkpoint of the equilibrium
     state: each round splits the bracket in three; the factor of safety lands within 10 % of
     Hoek and Bray's, like the serial search."""
-    from fdem.stages import factor_of_safety
+    from fdem.workflow.fos import factor_of_safety
 
     sim = scene().sim
     le = pf.analytic(**pf.GEOMETRIES["no_crack"])

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from fdem.interfaces import Interfaces
+from fdem.physics.interfaces import Interfaces
 from test_cohesive import KN, KT, Driver, props
 
 
@@ -25,7 +25,7 @@ def damaged_mode_I(p, frac=0.3):
     """An element opened into its softening branch (a fraction of the way to full damage)."""
     dr = Driver(p)
     op = p.f_t / KN
-    from fdem.cohesive import softening_integral
+    from fdem.physics.crack_properties import softening_integral
 
     o_r = op + (p.G_I - p.f_t ** 2 / (2 * KN)) / (p.f_t * softening_integral("munjiza"))
     for o in np.linspace(0.0, op + frac * (o_r - op), 400)[1:]:

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from fdem.kernels.triangles import (TC_MASS, assemble_triangle_forces, deformation_gradients, svk_piola,
-                                    triangle_constants, triangle_stress_state, viscous_piola)
-from fdem.materials import (ElasticMaterial, bar_wave_speed, combine_stable_dt, lame_constants,
-                            p_wave_speed, plane_lame_constants, smallest_altitude, stable_dt_altitude,
-                            stable_dt_penalty, triangle_critical_dt)
-from fdem.mesh import jittered_rectangle
-from fdem.model import ConformingTopology, Model
-from fdem.topology import build_topology
+from fdem.kernels.triangles import (TC_MASS, assemble_triangle_forces, deformation_gradients, svk_piola, triangle_constants, triangle_stress_state, viscous_piola)
+from fdem.physics.elastic import (ElasticMaterial, bar_wave_speed, lame_constants, p_wave_speed, plane_lame_constants)
+from fdem.physics.stability import combine_stable_dt, stable_dt_altitude, stable_dt_penalty, triangle_critical_dt
+from fdem.mesh.triangles import smallest_altitude
+from fdem.mesh.mesh import jittered_rectangle
+from fdem.mesh.topology import ConformingTopology
+from fdem.solve.model import Model
+from fdem.mesh.topology import build_topology
 
 E, NU, RHO = 10e9, 0.27, 2600.0
 

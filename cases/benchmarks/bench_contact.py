@@ -34,9 +34,9 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from fdem import contact as fc  # noqa: E402
-from fdem.mesh import structured_rectangle  # noqa: E402
-from fdem.topology import build_topology  # noqa: E402
+from fdem.physics import contact as fc  # noqa: E402
+from fdem.mesh.mesh import structured_rectangle  # noqa: E402
+from fdem.mesh.topology import build_topology  # noqa: E402
 from records import best_rate, record, save  # noqa: E402
 
 

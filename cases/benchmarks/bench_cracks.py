@@ -24,9 +24,10 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1]))  # run from a checkout without installing
 from records import best_rate, record, save  # noqa: E402
 
-from fdem.cohesive import CrackSet, four_slope_property_sets  # noqa: E402
-from fdem.mesh import structured_rectangle  # noqa: E402
-from fdem.topology import build_topology  # noqa: E402
+from fdem.physics.cracks import CrackSet
+from fdem.cases.four_slopes import four_slope_property_sets  # noqa: E402
+from fdem.mesh.mesh import structured_rectangle  # noqa: E402
+from fdem.mesh.topology import build_topology  # noqa: E402
 
 
 def main(argv=None) -> list[dict]:

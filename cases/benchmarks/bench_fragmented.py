@@ -30,11 +30,12 @@ sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from records import best_rate, record, save  # noqa: E402
 
-from fdem.contact import ContactSet  # noqa: E402
-from fdem.materials import ElasticMaterial  # noqa: E402
-from fdem.mesh import structured_rectangle  # noqa: E402
-from fdem.model import Model  # noqa: E402
-from fdem.solver import Damping, Simulation  # noqa: E402
+from fdem.physics.contact import ContactSet  # noqa: E402
+from fdem.physics.elastic import ElasticMaterial  # noqa: E402
+from fdem.mesh.mesh import structured_rectangle  # noqa: E402
+from fdem.solve.model import Model  # noqa: E402
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import Simulation  # noqa: E402
 
 YOUNG, POISSON, DENSITY = 0.59e9, 0.29, 2680.0   # four-slope intact rock
 SIDE = 100.0                                      # block side [m]

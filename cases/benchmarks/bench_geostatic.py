@@ -1,6 +1,6 @@
 """Geostatic start: static solve + crack preload against damped explicit relaxation.
 
-Scene: the fine low-angle four-slope geometry (``four_slope_model('low', 'fine')``) meshed at
+Scene: the fine low-angle four-slope geometry (``four_slope_geometry('low', 'fine')``) meshed at
 ``--size`` (0.225 m gives about 1e5 triangles), exploded, with crack elements (four-slope
 property sets) and contact, bottom fixed, sides on rollers, gravity.
 
@@ -34,15 +34,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from records import record, save  # noqa: E402
 
-from fdem.cohesive import CrackSet, four_slope_property_sets  # noqa: E402
-from fdem.contact import ContactSet  # noqa: E402
-from fdem.geostatic import geostatic_start, unbalanced_force_ratio  # noqa: E402
-from fdem.materials import ElasticMaterial  # noqa: E402
-from fdem.meshing import mesh_model  # noqa: E402
-from fdem.model import Model, geostatic_stress  # noqa: E402
-from fdem.scenes import four_slope_model  # noqa: E402
-from fdem.solver import Damping, Simulation  # noqa: E402
-from fdem.topology import build_topology  # noqa: E402
+from fdem.physics.cracks import CrackSet
+from fdem.cases.four_slopes import four_slope_property_sets  # noqa: E402
+from fdem.physics.contact import ContactSet  # noqa: E402
+from fdem.solve.geostatic import geostatic_start, unbalanced_force_ratio  # noqa: E402
+from fdem.physics.elastic import ElasticMaterial  # noqa: E402
+from fdem.mesh.triangulate import mesh_geometry  # noqa: E402
+from fdem.solve.model import Model, geostatic_stress  # noqa: E402
+from fdem.cases.four_slopes import four_slope_geometry  # noqa: E402
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import Simulation  # noqa: E402
+from fdem.mesh.topology import build_topology  # noqa: E402
 
 YOUNG, POISSON, DENSITY, GRAVITY = 0.59e9, 0.29, 2680.0, 9.81
 CONTACT_PENALTY = 10 * YOUNG
@@ -74,17 +76,17 @@ def main(argv=None):
     threads = numba.config.NUMBA_NUM_THREADS
     load_before = os.getloadavg()
 
-    geometry = four_slope_model("low", "fine")
+    geometry = four_slope_geometry("low", "fine")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        topo = build_topology(mesh_model(geometry, args.size))
+        topo = build_topology(mesh_geometry(geometry, args.size))
     n_tri = topo.n_triangles
     print(f"{n_tri} triangles, {topo.n_cracks} crack elements, {threads} thread(s)")
 
     # warm-up (Numba compilation and caches) on a small copy of the scene
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        small = build_topology(mesh_model(four_slope_model("low", "coarse"), 3.0))
+        small = build_topology(mesh_geometry(four_slope_geometry("low", "coarse"), 3.0))
     m_small, c_small = scene(small)
     geostatic_start(m_small, c_small)
     s_small = simulation(m_small, c_small, small)

@@ -16,9 +16,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from records import record, save  # noqa: E402
 
-from fdem.meshing import mesh_model, quality_report  # noqa: E402
-from fdem.scenes import four_slope_model  # noqa: E402
-from fdem.topology import build_topology  # noqa: E402
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.mesh.quality import quality_report  # noqa: E402
+from fdem.cases.four_slopes import four_slope_geometry  # noqa: E402
+from fdem.mesh.topology import build_topology  # noqa: E402
 
 
 def main(argv=None):
@@ -29,10 +30,10 @@ def main(argv=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         t0 = time.perf_counter()
-        model = four_slope_model("low", "fine")
+        model = four_slope_geometry("low", "fine")
         dfn = model.dfn()
         t1 = time.perf_counter()
-        mesh = mesh_model(model, args.size, algorithm=args.algorithm)
+        mesh = mesh_geometry(model, args.size, algorithm=args.algorithm)
         t2 = time.perf_counter()
         topo = build_topology(mesh)
         t3 = time.perf_counter()

@@ -25,10 +25,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from records import best_rate, record, save  # noqa: E402
 
-from fdem.materials import ElasticMaterial  # noqa: E402
-from fdem.mesh import structured_rectangle  # noqa: E402
-from fdem.model import Model  # noqa: E402
-from fdem.solver import Simulation  # noqa: E402
+from fdem.physics.elastic import ElasticMaterial  # noqa: E402
+from fdem.mesh.mesh import structured_rectangle  # noqa: E402
+from fdem.solve.model import Model  # noqa: E402
+from fdem.solve.simulation import Simulation  # noqa: E402
 
 
 def block(n_tri_target: int) -> Simulation:

@@ -39,15 +39,20 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from fdem.cohesive import CrackProperties, CrackSet, four_slope_property_sets  # noqa: E402
-from fdem.contact import ContactSet  # noqa: E402
-from fdem.geometry import Geometry, SegmentSet, rectangle  # noqa: E402
-from fdem.materials import ElasticMaterial  # noqa: E402
-from fdem.mesh import jittered_rectangle, structured_rectangle  # noqa: E402
-from fdem.meshing import mesh_model  # noqa: E402
-from fdem.model import Model  # noqa: E402
-from fdem.solver import Damping, InstabilityError, Simulation  # noqa: E402
-from fdem.topology import build_topology  # noqa: E402
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.cases.four_slopes import four_slope_property_sets  # noqa: E402
+from fdem.physics.contact import ContactSet  # noqa: E402
+from fdem.geometry.section import Geometry
+from fdem.geometry.joint_sets import SegmentSet
+from fdem.geometry.polygons import rectangle  # noqa: E402
+from fdem.physics.elastic import ElasticMaterial  # noqa: E402
+from fdem.mesh.mesh import jittered_rectangle, structured_rectangle  # noqa: E402
+from fdem.mesh.triangulate import mesh_geometry  # noqa: E402
+from fdem.solve.model import Model  # noqa: E402
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import InstabilityError, Simulation  # noqa: E402
+from fdem.mesh.topology import build_topology  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 OUT = ROOT / "docs" / "pareto"
@@ -178,7 +183,7 @@ def mode1(h: float, alpha: float, safety: float, rate_periods: float = 20.0) -> 
                    [SegmentSet([(0.5 * width, -0.1, 0.5 * width, height + 0.1)], must_lie_inside=False)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        topo = build_topology(mesh_model(geo, h))
+        topo = build_topology(mesh_geometry(geo, h))
     mat = ElasticMaterial(MI_E, MI_NU, MI_RHO)
     model = Model(topo, mat)
     joint = CrackProperties(f_t=MI_FT, c=10 * MI_FT, phi=30.0, G_I=MI_GI, G_II=100 * MI_GI, p_n=alpha * MI_E,
@@ -275,7 +280,7 @@ def impact(size: float, alpha: float, safety: float) -> dict:
     t0 = time.perf_counter()
     E, NU, RHO = 1e9, 0.25, 2500.0
     left, right = rectangle(0.0, 0.0, 1.0, 0.5, "left"), rectangle(1.0, 0.1, 1.0, 0.5, "right")
-    topo = build_topology(mesh_model(Geometry([left, right]), size))
+    topo = build_topology(mesh_geometry(Geometry([left, right]), size))
     model = Model(topo, ElasticMaterial(young=E, poisson=NU, density=RHO))
     body = np.repeat(topo.triangle_body, 3)
     model.set_initial_velocity(vx=2.0, where=np.flatnonzero(body == 0))
@@ -297,8 +302,8 @@ def planar(size: float, alpha: float, safety: float, tangential_ratio: float = 1
     with penalty ``p_n = alpha E`` (contact too), ``p_t = tangential_ratio p_n`` and step factor
     ``safety``."""
     p = load_case("planar_failure")
-    from fdem.scenes import planar_slope_model
-    from fdem.stages import factor_of_safety
+    from fdem.cases.planar_failure import planar_slope_geometry
+    from fdem.workflow.fos import factor_of_safety
 
     t0 = time.perf_counter()
     g = p.GEOMETRIES[geometry]
@@ -311,7 +316,7 @@ def planar(size: float, alpha: float, safety: float, tangential_ratio: float = 1
 
     p.property_sets = sets
     try:
-        scene = p.planar_failure_simulation(planar_slope_model(p.HEIGHT, **g), size, penalty=alpha * p.YOUNG)
+        scene = p.planar_failure_simulation(planar_slope_geometry(p.HEIGHT, **g), size, penalty=alpha * p.YOUNG)
     finally:
         p.property_sets = original
     sim = scene.sim
@@ -334,13 +339,13 @@ def four_slope_scene(tangential: str, size: float, toe: float = 15.0, crest: flo
     """A compact low-angle four-slope (H = 15 m, 45 deg, brick fabric of spacing ``spacing``)
     meshed at ``size`` with the four-slope crack properties, ``tangential`` ``"paper"``
     (``k_t = 917 GPa/m``) or ``"tied"`` (``p_t = p_n``)."""
-    from fdem.scenes import four_slope_model
+    from fdem.cases.four_slopes import four_slope_geometry
 
     fs = load_case("four_slopes")
-    geo = four_slope_model("low", spacing, toe_length=toe, crest_length=crest, base_depth=base)
+    geo = four_slope_geometry("low", spacing, toe_length=toe, crest_length=crest, base_depth=base)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        topo = build_topology(mesh_model(geo, size))
+        topo = build_topology(mesh_geometry(geo, size))
     model = Model(topo, ElasticMaterial(young=fs.YOUNG, poisson=fs.POISSON, density=fs.DENSITY))
     model.set_gravity(0.0, -fs.GRAVITY)
     model.fix("bottom")
@@ -358,8 +363,9 @@ def tangential_study(size: float, with_fos: bool = True) -> list[dict]:
     four-slope: stable step; elastic displacement under gravity after a damped explicit run
     from rest (crack elements held elastic) against the static solve of the intact mesh;
     joint slip; and the factor of safety by strength reduction."""
-    from fdem.geostatic import conforming_static_stress, geostatic_start
-    from fdem.stages import Convergence, Stage, factor_of_safety, fundamental_damping, response_time, run_stage
+    from fdem.solve.geostatic import conforming_static_stress, geostatic_start
+    from fdem.workflow.stages import Convergence, Stage, response_time, run_stage
+    from fdem.workflow.fos import factor_of_safety, fundamental_damping
 
     rows = []
     for tangential in ("paper", "tied"):
@@ -424,7 +430,7 @@ def runout_start() -> Path:
     whenever a kernel source has changed since (the digest of ``fdem._kernel_cache`` is kept
     beside it), so that no sweep starts from a state older kernels produced."""
     import fdem
-    from fdem._kernel_cache import kernel_sources_digest
+    from fdem.kernels.cache import kernel_sources_digest
 
     path = RUNOUT_DIR / "runout_start.npz"
     stamp = RUNOUT_DIR / "kernel_sources.sha256"
@@ -432,7 +438,7 @@ def runout_start() -> Path:
     if path.exists() and stamp.exists() and stamp.read_text().strip() == digest:
         return path
     from fdem.cases import quick_start
-    from fdem.workflow import SlopeWorkflow, run_slope_workflow
+    from fdem.workflow.slope import SlopeWorkflow, run_slope_workflow
 
     path.unlink(missing_ok=True)
     _, sim, _, _ = quick_start.build(quick_start.SIZE, None, progress=False)
@@ -453,12 +459,12 @@ def runout(safety: float, seed: int | None = None, kick: float = 1e-6) -> dict:
     ``kick`` [m/s] (normal, seeded): the spread of such runs is the chaotic noise floor that a
     time-step effect must exceed to matter. Error measures: the ledger's balance error relative
     to the energy moved, and (in the docs) the runout distance against the smallest step."""
-    from fdem.analysis import runout as runout_figures
-    from fdem.analysis import slope_toe
+    from fdem.results.analysis import runout as runout_figures
+    from fdem.geometry.polygons import slope_toe
     from fdem.cases import quick_start
-    from fdem.checkpoint import load_checkpoint
-    from fdem.stages import response_time, run_stage
-    from fdem.workflow import SlopeWorkflow, runout_stage
+    from fdem.solve.checkpoint import load_checkpoint
+    from fdem.workflow.stages import response_time, run_stage
+    from fdem.workflow.slope import SlopeWorkflow, runout_stage
 
     start = runout_start()
     geo, sim, cracks, _ = quick_start.build(quick_start.SIZE, None, progress=False)

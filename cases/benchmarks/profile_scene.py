@@ -58,10 +58,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import four_slopes  # noqa: E402
 from records import record, save  # noqa: E402
 
-import fdem.solver as solver_mod  # noqa: E402
-from fdem.kernels import contact as kc  # noqa: E402
-from fdem.solver import NO_DAMPING  # noqa: E402
-from fdem.stages import Stage, fundamental_damping, run_stage  # noqa: E402
+import fdem.solve.simulation as solver_mod  # noqa: E402
+from fdem.kernels import contact_pairs as kc  # noqa: E402
+from fdem.solve.damping import NO_DAMPING  # noqa: E402
+from fdem.workflow.stages import Stage, run_stage
+from fdem.workflow.fos import fundamental_damping  # noqa: E402
 
 PARTS = ("crack pass", "contact search", "pair forces", "contact other", "triangle step", "output", "python")
 PHASES = ("intact", "softening", "failing", "runout")
@@ -181,9 +182,9 @@ class Profiler:
 
 def _warm_contact_kernels() -> None:
     """Load the contact kernels (search, pair forces, gather) once, outside the profile."""
-    from fdem.contact import ContactSet
-    from fdem.mesh import structured_rectangle
-    from fdem.topology import build_topology
+    from fdem.physics.contact import ContactSet
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
 
     topo = build_topology(structured_rectangle(4, 4, 4.0, 4.0))
     cs = ContactSet(topo, penalty=1e9, friction_angle=30.0, check_overlap=False)
@@ -253,7 +254,7 @@ def main(argv=None) -> dict:
     results = []
     for st in stages:
         if st.name == "from_checkpoint":
-            from fdem.checkpoint import load_checkpoint
+            from fdem.solve.checkpoint import load_checkpoint
 
             load_checkpoint(sim, args.from_checkpoint)   # the reduction factor comes with it
         prof.runout = st.name == "runout"

@@ -31,14 +31,19 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import case_parser, check_common, set_threads
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.geometry import Geometry, rectangle
-from fdem.materials import ElasticMaterial
-from fdem.meshing import mesh_model
-from fdem.model import DEFAULT_ELEMENT_DAMPING, Model
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import rectangle
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.model import DEFAULT_ELEMENT_DAMPING, Model
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
+
+__all__ = ["NAME", "G", "CONTACT_PENALTY", "unbreakable", "sliding_distance", "build", "incline_model", "run",
+           "STUDY_SIZES", "STUDY_FRACTIONS", "STUDY_CASES", "damping_study", "plot_study", "main", "YOUNG", "POISSON", "DENSITY"]
 
 NAME = "block-on-incline"
 G = 9.81
@@ -84,7 +89,7 @@ def incline_model(theta_deg: float, block_x: float, block_width: float, block_he
     caller supports or shakes the base."""
     base = rectangle(0.0, 0.0, base_length, 0.5, name="incline")
     block = rectangle(block_x, 0.5, block_width, block_height, name="block")
-    topo = build_topology(mesh_model(Geometry([base, block]), size))
+    topo = build_topology(mesh_geometry(Geometry([base, block]), size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     if element_damping > 0:
         model.set_element_damping(element_damping)

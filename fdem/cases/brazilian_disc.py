@@ -30,13 +30,17 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import case_parser, check_common, set_threads
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.geometry import Geometry, disc
-from fdem.materials import ElasticMaterial
-from fdem.meshing import mesh_model
-from fdem.model import Model
-from fdem.solver import Simulation
-from fdem.topology import build_topology
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import disc
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+from fdem.mesh.topology import build_topology
+
+__all__ = ["NAME", "DIAMETER", "PENALTY", "disc_mesh", "run", "main", "load_plot", "YOUNG", "POISSON", "DENSITY", "F_T", "COHESION", "PHI", "G_I", "G_II"]
 
 NAME = "brazilian-disc"
 DIAMETER = 0.1  # m
@@ -60,7 +64,7 @@ def disc_mesh(divisions: float, algorithm: str = "delaunay"):
     n_sides = max(24, 4 * int(np.ceil(np.pi * DIAMETER / size / 4.0)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return mesh_model(Geometry([disc((0.0, 0.0), DIAMETER / 2, n_sides=n_sides)]), size, algorithm=algorithm)
+        return mesh_geometry(Geometry([disc((0.0, 0.0), DIAMETER / 2, n_sides=n_sides)]), size, algorithm=algorithm)
 
 
 def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = 6.0, algorithm: str = "delaunay",

@@ -38,7 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..ensembles import Distribution, Ensemble, run_ensemble, summarize
+from fdem.workflow.ensembles import Distribution, Ensemble, run_ensemble
+from fdem.results.ensemble_summary import summarize
+
+__all__ = ["GEOMETRY", "PlanarDFNScene", "PARAMETERS", "ensemble", "main"]
 
 GEOMETRY = dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=None)
 
@@ -57,9 +60,9 @@ class PlanarDFNScene:
 
     def block_corners(self) -> np.ndarray:
         """(3, 2) corners of the block above the plane [m], counter-clockwise: the daylight point
-        ``D = (0.3 H + 0.2 H cot psi_f, 0.5 H)`` (:func:`fdem.scenes.planar_slope_model`), the
+        ``D = (0.3 H + 0.2 H cot psi_f, 0.5 H)`` (:func:`fdem.scenes.planar_slope_geometry`), the
         plane's upper end ``E = D + H (cot psi_p, 1)`` and the crest ``D + H (cot psi_f, 1)``."""
-        from .planar_failure import HEIGHT
+        from fdem.cases.planar_failure import HEIGHT
 
         H = HEIGHT
         cot_f = 1.0 / math.tan(math.radians(GEOMETRY["face_angle"]))
@@ -80,7 +83,9 @@ class PlanarDFNScene:
         that raised the FoS by up to 6 % above the plane-only Hoek-Bray value. Pieces left
         shorter than ``0.25 size`` are dropped.
         """
-        from fdem.geometry import Polygon, StochasticSet, clip_segments
+        from fdem.geometry.polygons import Polygon
+        from fdem.geometry.joint_sets import StochasticSet
+        from fdem.geometry.dfn import clip_segments
 
         corners = self.block_corners()
         box = self.region or (*corners.min(axis=0), *corners.max(axis=0))
@@ -106,12 +111,13 @@ class PlanarDFNScene:
 
     def geometry(self, dfn_seed: int = 0, trace_length: float = 3.0, dip_scatter: float = 10.0, joints: int = 4):
         """The slope model with the cross joints (joint set 2; none if all were dropped)."""
-        from .planar_failure import HEIGHT
+        from fdem.cases.planar_failure import HEIGHT
 
-        from fdem.geometry import Geometry, SegmentSet
-        from fdem.scenes import planar_slope_model
+        from fdem.geometry.section import Geometry
+        from fdem.geometry.joint_sets import SegmentSet
+        from fdem.cases.planar_failure import planar_slope_geometry
 
-        base = planar_slope_model(HEIGHT, **GEOMETRY)
+        base = planar_slope_geometry(HEIGHT, **GEOMETRY)
         segs = self.cross_joints(dfn_seed, trace_length, dip_scatter, joints)
         sets = (*base.joint_sets, SegmentSet(segs.reshape(-1, 4), name="cross joints")) if len(segs) else \
             base.joint_sets
@@ -121,7 +127,7 @@ class PlanarDFNScene:
                  dip_scatter: float = 10.0, joints: int = 4):
         import warnings
 
-        from .planar_failure import planar_failure_simulation
+        from fdem.cases.planar_failure import planar_failure_simulation
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")          # dropped short joint pieces are expected in a DFN

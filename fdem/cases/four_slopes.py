@@ -32,8 +32,87 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
-                     threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+
+import math
+from fdem.mesh.topology import INTACT
+from fdem.geometry.joint_sets import BrickSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import simple_slope
+from fdem.physics.crack_properties import CrackProperties
+
+__all__ = ["four_slope_property_sets", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
+           "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
+           "ground_surface", "simulation", "main", "YOUNG", "POISSON", "DENSITY"]
+
+
+def four_slope_property_sets() -> dict[int, CrackProperties]:
+    """The paper's crack-element table (seed 002, Table 1; ``/shared/cases.md`` section A).
+
+    Tag 0: intact rock bridges; tag 1: DFN fractures. The normal penalty "5.9 GPa.m" is read
+    as Munjiza's penalty ``p_n = 5.9 GPa`` (= 10 E; ``k_n = p_n / L0``); the tangential
+    "917 GPa/m" as a stiffness per unit area ``k_t = 917 GPa/m`` (see ``docs/cohesive.md``).
+    """
+    common = dict(p_n=5.9e9, k_t=917e9)
+    return {
+        INTACT: CrackProperties(f_t=50e3, c=100e3, phi=30.0, G_I=130.0, G_II=1300.0,
+                                name="intact rock bridges", **common),
+        1: CrackProperties(f_t=10e3, c=50e3, phi=11.0, G_I=13.0, G_II=130.0,
+                           name="DFN joints", **common),
+    }
+
+
+FOUR_SLOPE_HEIGHT = 15.0
+
+
+FOUR_SLOPE_FACE_ANGLE = 45.0
+
+
+FOUR_SLOPE_JOINT_DIP = {"low": 15.0, "high": 115.0}
+
+
+FOUR_SLOPE_SPACING = {"fine": 1.0, "coarse": 5.0}
+
+
+def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_length: float | None = None,
+                     crest_length: float | None = None, base_depth: float | None = None,
+                     min_joint_length: float = 0.05, joint_offset: float | None = None) -> Geometry:
+    """The jointed slopes of cases.md A (seed 002): H = 15 m, face 45 deg, brick fabric.
+
+    ``angle`` is ``"low"`` (persistent joints at 15 deg, inclined) or ``"high"`` (115 deg,
+    anti-inclined). ``spacing`` is ``"fine"`` (s = 1 m, s:H = 1:15), ``"coarse"`` (s = 5 m, s:H
+    = 1:3 as in the paper's text; its figure caption says 1:5, pass ``3.0`` for that) or a
+    number [m]. Cross joints are perpendicular at d = 2 s, offset half a block between layers.
+
+    ``joint_offset`` places the persistent joints relative to the toe, as a fraction of the
+    spacing measured along the joints' normal: 0 puts one through the toe, 0.5 puts the toe
+    midway between two. The paper's text fixes it only through its results: in the fine models
+    "a critical persistent joint crosses the slope toe" (0), and the coarse result depends on
+    whether "the next persistent joint does not cross the slope toe", the case it reports for
+    its thick layers (0.5). Default: 0 for ``"fine"``, 0.5 for ``"coarse"`` and 0 for a number.
+
+    Assumed (the paper gives no extents): toe floor 3 H, crest plateau 2 H, base H below the toe.
+    """
+    if angle not in FOUR_SLOPE_JOINT_DIP:
+        raise ValueError(f"angle must be 'low' or 'high', got {angle!r}")
+    s = FOUR_SLOPE_SPACING[spacing] if isinstance(spacing, str) else float(spacing)
+    H = FOUR_SLOPE_HEIGHT
+    toe_length = 3 * H if toe_length is None else toe_length
+    base_depth = H if base_depth is None else base_depth
+    slope = simple_slope(H, FOUR_SLOPE_FACE_ANGLE, crest_length=2 * H if crest_length is None else crest_length,
+                         toe_length=toe_length, base_depth=base_depth, name="slope")
+    # Layers start at the toe, so a persistent joint daylights through the toe as in the paper.
+    toe = (toe_length, base_depth)
+    dip = FOUR_SLOPE_JOINT_DIP[angle]
+    n = (-math.sin(math.radians(dip)), math.cos(math.radians(dip)))
+    if joint_offset is None:
+        joint_offset = 0.5 if spacing == "coarse" else 0.0
+    if not (math.isfinite(joint_offset) and 0.0 <= joint_offset < 1.0):
+        raise ValueError(f"joint_offset must be a fraction of the spacing in [0, 1), got {joint_offset!r}")
+    offset = toe[0] * n[0] + toe[1] * n[1] + joint_offset * s
+    fabric = BrickSet(dip=dip, spacing=s, offset=offset, name=f"{angle}-angle brick fabric")
+    return Geometry([slope], [fabric], min_joint_length=min_joint_length)
+
 
 NAME = "four-slopes"
 # Table 1 of the paper (cases.md A): finite elements
@@ -46,13 +125,13 @@ SIZE = 0.5
 def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
           joint_offset: float | None = None):
     """Geometry, mesh and topology of one of the four slopes (``joint_offset``: where the
-    persistent joints sit relative to the toe, :func:`fdem.scenes.four_slope_model`)."""
-    from fdem.meshing import mesh_model
-    from fdem.scenes import four_slope_model
-    from fdem.topology import build_topology
+    persistent joints sit relative to the toe, :func:`fdem.scenes.four_slope_geometry`)."""
+    from fdem.mesh.triangulate import mesh_geometry
+    from fdem.cases.four_slopes import four_slope_geometry
+    from fdem.mesh.topology import build_topology
 
-    geometry = four_slope_model(angle, spacing, joint_offset=joint_offset)
-    mesh = mesh_model(geometry, size, refine_near_joints=refine)
+    geometry = four_slope_geometry(angle, spacing, joint_offset=joint_offset)
+    mesh = mesh_geometry(geometry, size, refine_near_joints=refine)
     return geometry, mesh, build_topology(mesh)
 
 
@@ -73,12 +152,13 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     (:func:`fdem.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
     laterally confined stress ``sigma_xx = K0 sigma_yy`` of a flat ground instead (not in
     equilibrium under the face: it needs a damped settling stage). Returns ``(sim, cracks)``."""
-    from fdem.cohesive import CrackSet, four_slope_property_sets
-    from fdem.contact import ContactSet
-    from fdem.geostatic import geostatic_start
-    from fdem.materials import ElasticMaterial
-    from fdem.model import Model, geostatic_stress
-    from fdem.solver import Simulation
+    from fdem.physics.cracks import CrackSet
+    from fdem.cases.four_slopes import four_slope_property_sets
+    from fdem.physics.contact import ContactSet
+    from fdem.solve.geostatic import geostatic_start
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model, geostatic_stress
+    from fdem.solve.simulation import Simulation
 
     model = Model(topology, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_gravity(0.0, -GRAVITY)
@@ -128,12 +208,12 @@ def main(argv=None) -> dict:
     except ValueError:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
 
-    from fdem.analysis import slope_toe
-    from fdem.checkpoint import save_checkpoint
-    from fdem.meshing import quality_report
-    from fdem.preview import plot_mesh_png, write_mesh_vtu
-    from fdem.report import RunReport
-    from fdem.workflow import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
+    from fdem.geometry.polygons import slope_toe
+    from fdem.solve.checkpoint import save_checkpoint
+    from fdem.mesh.quality import quality_report
+    from fdem.mesh.preview import plot_mesh_png, write_mesh_vtu
+    from fdem.results.report import RunReport
+    from fdem.workflow.slope import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -199,9 +279,9 @@ def main(argv=None) -> dict:
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")
     else:
-        from fdem.report import _jsonable
+        from fdem.io.jsonable import jsonable
 
-        summary = _jsonable(summary)
+        summary = jsonable(summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(f"wrote {out / 'summary.json'}")
     return summary

@@ -41,8 +41,69 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
-                     threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+
+from fdem.geometry.joint_sets import SegmentSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import simple_slope
+
+__all__ = ["MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "toughness_G_I", "property_sets", "build",
+           "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS", "JOINT_COHESION", "JOINT_FRICTION"]
+
+
+MULIASHI_SPACING_RULES = ("pitch", "gap")
+
+
+def muliashi_geometry(spacing_rule: str = "pitch", above_toe: bool = True, min_joint_length: float = 0.05) -> Geometry:
+    """The Muliashi open-pit slope of cases.md B (seed 001): 30 m x 22.5 m, 15 m bench at 65 deg,
+    the model ending 7.5 m into the crest plateau; five layers of intermittent bedding joints,
+    each joint 3 m long dipping 25 deg, layers 2.14 m apart (perpendicular).
+
+    The paper's "horizontal distance of each joint in the same layer is 3 m" reads two ways:
+
+    * ``spacing_rule="pitch"``: 3 m horizontally from the start of one joint to the start of the
+      next, an along-trace period of ``3 / cos 25 = 3.31 m`` and rock bridges of 0.31 m
+      (nearly persistent layers);
+    * ``spacing_rule="gap"``: a 3 m horizontal gap between one joint's end and the next
+      one's start, a period of ``(3 cos 25 + 3) / cos 25 = 6.31 m`` and rock bridges of 3.31 m.
+
+    ``above_toe=True`` (the paper) keeps only the joints that lie wholly above the toe's
+    elevation; ``False`` keeps every joint of the five layers, the floor and the ground below
+    the toe included. Assumed: the lowest layer half a layer spacing above the bedding plane
+    through the toe; joints of a layer start at whole periods from the point of the layer
+    nearest the toe (the paper gives no phase).
+    """
+    if spacing_rule not in MULIASHI_SPACING_RULES:
+        raise ValueError(f"spacing_rule must be one of {MULIASHI_SPACING_RULES}, got {spacing_rule!r}")
+    width, height, bench, face = 30.0, 22.5, 15.0, 65.0
+    crest = 7.5
+    run = bench / math.tan(math.radians(face))
+    toe_x = width - crest - run
+    toe_y = height - bench
+    slope = simple_slope(bench, face, crest_length=crest, toe_length=toe_x, base_depth=toe_y, name="slope")
+    dip = math.radians(25.0)
+    t = np.array([math.cos(dip), math.sin(dip)])
+    n = np.array([-t[1], t[0]])
+    trace, layer = 3.0, 2.14
+    period = 3.0 / t[0] if spacing_rule == "pitch" else (3.0 * t[0] + 3.0) / t[0]
+    toe = np.array([toe_x, toe_y])
+    segments = []
+    reach = math.hypot(width, height)
+    for row in range(5):
+        origin = toe + (row + 0.5) * layer * n
+        for k in range(-int(reach / period) - 2, int(reach / period) + 2):
+            a = origin + k * period * t
+            b = a + trace * t
+            if above_toe and min(a[1], b[1]) < toe_y:
+                continue
+            if max(a[0], b[0]) < 0 or min(a[0], b[0]) > width or max(a[1], b[1]) < 0 or min(a[1], b[1]) > height:
+                continue
+            if not slope.contains(np.array([a, b, 0.5 * (a + b)])).any():
+                continue
+            segments.append([a[0], a[1], b[0], b[1]])
+    joints = SegmentSet(np.array(segments), name=f"bedding ({spacing_rule})")
+    return Geometry([slope], [joints], min_joint_length=min_joint_length)
+
 
 YOUNG, POISSON, DENSITY, UCS = 5.96e9, 0.15, 2560.0, 34.5e6
 JOINT_COHESION, JOINT_FRICTION = 149.33e3, 12.35
@@ -58,7 +119,7 @@ def toughness_G_I(toughness_ratio: float = 88.7) -> float:
 def property_sets(intact_phi: float = 30.0, g_i: float = 300.0, penalty_ratio: float = 10.0,
                   joint_softening_slip: float = 1e-3, dilation_angle: float = 5.0, dilation_limit: float = 5e-3):
     """Crack-element property sets derived from the macro properties (module docstring)."""
-    from ..cohesive import CrackProperties
+    from fdem.physics.crack_properties import CrackProperties
 
     phi = math.radians(intact_phi)
     c_rock = UCS * (1 - math.sin(phi)) / (2 * math.cos(phi))
@@ -79,18 +140,19 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
     """Geometry, mesh, model in static equilibrium, crack elements, contact and the simulation.
 
     Supports as the paper: x fixed on the left and right sides, x and y fixed at the bottom."""
-    from ..cohesive import CrackSet, Heterogeneity
-    from ..contact import ContactSet
-    from ..geostatic import geostatic_start
-    from ..materials import ElasticMaterial
-    from ..meshing import mesh_model
-    from ..model import Model
-    from ..scenes import muliashi_model
-    from ..solver import Simulation
-    from ..topology import build_topology
+    from fdem.physics.cracks import CrackSet
+    from fdem.physics.heterogeneity import Heterogeneity
+    from fdem.physics.contact import ContactSet
+    from fdem.solve.geostatic import geostatic_start
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.mesh.triangulate import mesh_geometry
+    from fdem.solve.model import Model
+    from fdem.cases.muliashi import muliashi_geometry
+    from fdem.solve.simulation import Simulation
+    from fdem.mesh.topology import build_topology
 
-    geometry = muliashi_model(spacing_rule, above_toe)
-    topo = build_topology(mesh_model(geometry, size))
+    geometry = muliashi_geometry(spacing_rule, above_toe)
+    topo = build_topology(mesh_geometry(geometry, size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_gravity(0.0, -9.81)
     model.fix("bottom")
@@ -113,9 +175,10 @@ def build_simulation(size: float, spacing_rule: str = "pitch", above_toe: bool =
 
 
 def run_one(args, spacing_rule: str, out: Path) -> dict:
-    from ..analysis import slope_toe
-    from ..report import RunReport
-    from ..stages import Convergence, GravityIncrease, Stage, factor_of_safety, response_time, run_stage
+    from fdem.geometry.polygons import slope_toe
+    from fdem.results.report import RunReport
+    from fdem.workflow.stages import Convergence, Stage, response_time, run_stage
+    from fdem.workflow.fos import GravityIncrease, factor_of_safety
 
     t0 = time.perf_counter()
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
@@ -127,7 +190,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
           f"({int((topo.crack_tag > 0).sum())} on joints), dt {sim.dt:.3g} s, {threads} thread(s), "
           f"{len(geo.over_strength['shear']) + len(geo.over_strength['tensile'])} elements over strength at k = 1")
     toe_x, floor_y = slope_toe(geometry.bodies[0])
-    from fdem.events import MULIASHI
+    from fdem.results.events import MULIASHI
 
     report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
     T = response_time(sim.model)

@@ -26,11 +26,14 @@ import numpy as np
 
 from fdem.cases.block_on_incline import CONTACT_PENALTY, G, YOUNG, incline_model, unbreakable
 from fdem.cases.common import check_common, set_threads
-from fdem.cohesive import CrackSet
-from fdem.contact import ContactSet
-from fdem.model import DEFAULT_ELEMENT_DAMPING
-from fdem.shaking import AccelerationHistory, newmark_response, shake_base, yield_acceleration
-from fdem.solver import Simulation
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.solve.model import DEFAULT_ELEMENT_DAMPING
+from fdem.physics.shaking import AccelerationHistory, shake_base
+from fdem.reference.newmark import newmark_response, yield_acceleration
+from fdem.solve.simulation import Simulation
+
+__all__ = ["AMPLITUDE_RATIO", "PERIOD", "T_SETTLE", "SIZES", "pulse", "build", "run", "plot", "main", "THETA", "PHI"]
 
 THETA, PHI = 20.0, 30.0       # deg: a_y = 1.967 m/s^2
 AMPLITUDE_RATIO = 2.0         # A / a_y

@@ -40,17 +40,93 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import check_common, set_threads
-from fdem.cohesive import CrackProperties, CrackSet
-from fdem.contact import ContactSet
-from fdem.geostatic import geostatic_start
-from fdem.limit_equilibrium import planar_fos
-from fdem.materials import ElasticMaterial
-from fdem.meshing import mesh_model
-from fdem.model import Model
-from fdem.scenes import planar_slope_model
-from fdem.solver import Damping, Simulation
-from fdem.stages import Convergence, Failure, Stage, factor_of_safety, response_time
-from fdem.topology import build_topology
+from fdem.physics.crack_properties import CrackProperties
+from fdem.physics.cracks import CrackSet
+from fdem.physics.contact import ContactSet
+from fdem.solve.geostatic import geostatic_start
+from fdem.reference.hoek_bray import planar_fos
+from fdem.physics.elastic import ElasticMaterial
+from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.model import Model
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import Simulation
+from fdem.workflow.stages import Convergence, Failure, Stage, response_time
+from fdem.workflow.fos import factor_of_safety
+from fdem.mesh.topology import build_topology
+
+from fdem.geometry.joint_sets import SegmentSet
+from fdem.geometry.section import Geometry
+from fdem.geometry.polygons import simple_slope
+
+__all__ = ["planar_slope_geometry", "G", "UNIT_WEIGHT", "PENALTY", "HEIGHT", "GEOMETRIES", "PlanarScene",
+           "property_sets", "analytic", "planar_failure_simulation", "block_nodes", "trial_stage", "run_case",
+           "plot", "main", "YOUNG", "POISSON", "DENSITY", "JOINT_COHESION", "JOINT_FRICTION"]
+
+
+def planar_slope_geometry(height: float, face_angle: float, plane_angle: float, crest_length: float | None = None,
+                       toe_length: float | None = None, base_depth: float | None = None,
+                       tension_crack_offset: float | None = None, toe_step: float | None = None) -> Geometry:
+    """A slope with one persistent joint daylighting in the face: the planar-failure verification
+    problem (Hoek & Bray 1981, ch. 7; Wyllie & Mah 2004, ch. 6; :mod:`fdem.limit_equilibrium`).
+
+    ``height`` H [m] is the face above the daylight point ``D`` of the plane, ``face_angle``
+    psi_f and ``plane_angle`` psi_p [deg] (``psi_p < psi_f``). Joint set 1 is the sliding plane,
+    from ``D`` up at psi_p to the horizontal upper surface, or, with ``tension_crack_offset`` b
+    [m], to the foot of a vertical tension crack b behind the crest: joint set 2, of depth
+    ``z = H - (H cot psi_f + b) tan psi_p``.
+
+    ``toe_step`` [m] (default ``H/5``) continues the face below ``D`` down to the toe floor. The
+    down-dip direction from ``D`` points into air only there: with the plane daylighting at the
+    very toe of a horizontal floor (``toe_step=0``) the block's tip is driven into the floor
+    rock, which then holds the block over a finite slip; limit equilibrium assumes it free to
+    slide out.
+
+    Assumed extents, compact since the block's equilibrium does not depend on them: toe floor
+    ``toe_length`` (default 0.3 H) left of the toe, base ``base_depth`` (default 0.3 H) below
+    it, and a crest plateau reaching ``crest_length`` (default H/2 beyond the point where the
+    plane or the crack meets the upper surface) behind the crest. ``D`` lies at
+    ``(toe_length + toe_step cot psi_f, base_depth + toe_step)``.
+    """
+    H, pf, pp = float(height), float(face_angle), float(plane_angle)
+    if not H > 0:
+        raise ValueError(f"planar slope: height must be positive, got {height} m")
+    if not 0 < pp < pf <= 90:
+        raise ValueError(f"planar slope: need 0 < plane angle < face angle <= 90 deg for the plane to daylight "
+                         f"in the face, got plane {plane_angle} deg, face {face_angle} deg")
+    step = 0.2 * H if toe_step is None else float(toe_step)
+    if step < 0:
+        raise ValueError(f"planar slope: toe_step must be >= 0, got {toe_step} m")
+    cot_f = 0.0 if pf == 90 else 1.0 / math.tan(math.radians(pf))
+    cot_p, tan_p = 1.0 / math.tan(math.radians(pp)), math.tan(math.radians(pp))
+    run_above = H * cot_f                      # face run from D to the crest
+    if tension_crack_offset is None:
+        reach = H * cot_p                      # plane meets the upper surface this far from D
+    else:
+        b = float(tension_crack_offset)
+        reach = run_above + b
+        if b <= 0 or reach * tan_p >= H:
+            raise ValueError(f"planar slope: the tension crack must stand behind the crest (b > 0) and reach the "
+                             f"plane below the surface (b < {H * cot_p - run_above:.6g} m), got b = {b} m")
+    toe_length = 0.3 * H if toe_length is None else float(toe_length)
+    base_depth = 0.3 * H if base_depth is None else float(base_depth)
+    crest_length = (reach - run_above) + 0.5 * H if crest_length is None else float(crest_length)
+    if crest_length <= reach - run_above:
+        raise ValueError(f"planar slope: crest_length {crest_length} m must exceed "
+                         f"{reach - run_above:.6g} m, where the joints meet the upper surface")
+    if step > 0:
+        slope = simple_slope(H + step, pf, crest_length=crest_length, toe_length=toe_length,
+                             base_depth=base_depth, name="slope")
+        dx, dy = toe_length + step * cot_f, base_depth + step
+    else:
+        slope = simple_slope(H, pf, crest_length=crest_length, toe_length=toe_length, base_depth=base_depth,
+                             name="slope")
+        dx, dy = toe_length, base_depth
+    end = (dx + reach, dy + reach * tan_p)
+    sets = [SegmentSet([[dx, dy, end[0], end[1]]], name="sliding plane")]
+    if tension_crack_offset is not None:
+        sets.append(SegmentSet([[end[0], end[1], end[0], dy + H]], name="tension crack"))
+    return Geometry([slope], sets)
+
 
 G = 9.81
 UNIT_WEIGHT = 25e3                              # gamma [N/m^3]
@@ -115,10 +191,10 @@ def planar_failure_simulation(geometry, size: float, cohesion: float = JOINT_COH
                               friction_angle: float = JOINT_FRICTION, penalty: float = PENALTY,
                               out_dir: Path | None = None, pictures: bool = False,
                               progress: bool = False) -> PlanarScene:
-    """Mesh ``geometry`` (a :func:`fdem.scenes.planar_slope_model`) at ``size`` [m] and build the
+    """Mesh ``geometry`` (a :func:`fdem.scenes.planar_slope_geometry`) at ``size`` [m] and build the
     simulation: elastic rock, crack elements (:func:`property_sets`), contact with the joint's
     friction, bottom fixed, sides on rollers, gravity, and a static geostatic start."""
-    topo = build_topology(mesh_model(geometry, size))
+    topo = build_topology(mesh_geometry(geometry, size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_gravity(0.0, -G)
     model.fix("bottom")
@@ -192,7 +268,7 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
     g = GEOMETRIES[name]
     le = analytic(**g)
     t0 = time.perf_counter()
-    scene = planar_failure_simulation(planar_slope_model(HEIGHT, **g), size, out_dir=out_dir, pictures=pictures)
+    scene = planar_failure_simulation(planar_slope_geometry(HEIGHT, **g), size, out_dir=out_dir, pictures=pictures)
     cap_simulated_time(scene.sim, max_time)
     t1 = time.perf_counter()
     try:

@@ -37,8 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals,
-                     threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+
+__all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
+           "FOS_BRACKET", "geometry", "property_sets", "build", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
 
 NAME = "quick-start"
 HEIGHT, FACE_ANGLE = 10.0, 60.0                 # slope height [m], face angle [deg]
@@ -57,7 +59,9 @@ FOS_BRACKET = (1.0, 2.0, 0.05)                  # (stable, failing, tolerance) o
 def geometry(height: float = HEIGHT, face_angle: float = FACE_ANGLE, joint_dip: float = JOINT_DIP,
              spacing: float = JOINT_SPACING):
     """The slope polygon and its brick-pattern joints, one persistent joint through the toe."""
-    from fdem.geometry import BrickSet, Geometry, simple_slope
+    from fdem.geometry.joint_sets import BrickSet
+    from fdem.geometry.section import Geometry
+    from fdem.geometry.polygons import simple_slope
 
     slope = simple_slope(height, face_angle, crest_length=CREST_LENGTH, toe_length=TOE_LENGTH,
                          base_depth=BASE_DEPTH, name="slope")
@@ -69,7 +73,7 @@ def geometry(height: float = HEIGHT, face_angle: float = FACE_ANGLE, joint_dip: 
 
 def property_sets(penalty: float = PENALTY) -> dict:
     """Tag 0 intact rock bridges, tag 1 joints; ``p_t = p_n``."""
-    from fdem.cohesive import CrackProperties
+    from fdem.physics.crack_properties import CrackProperties
 
     common = dict(p_n=penalty, p_t=penalty)
     return {
@@ -81,20 +85,20 @@ def property_sets(penalty: float = PENALTY) -> dict:
 
 def build(size: float = SIZE, out_dir: Path | None = None, pictures: bool = False, progress: bool = True):
     """Geometry, simulation (in static equilibrium) and crack set of the quick-start slope."""
-    from fdem.cohesive import CrackSet
-    from fdem.contact import ContactSet
-    from fdem.geostatic import geostatic_start
-    from fdem.materials import ElasticMaterial
-    from fdem.meshing import mesh_model
-    from fdem.model import Model
-    from fdem.solver import Simulation
-    from fdem.topology import build_topology
+    from fdem.physics.cracks import CrackSet
+    from fdem.physics.contact import ContactSet
+    from fdem.solve.geostatic import geostatic_start
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.mesh.triangulate import mesh_geometry
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+    from fdem.mesh.topology import build_topology
 
     geo = geometry()
     with warnings.catch_warnings():
         # slivers shorter than MIN_JOINT_LENGTH are dropped on purpose (they would shrink the step)
         warnings.filterwarnings("ignore", message="dropped .* joint segment", category=UserWarning)
-        topo = build_topology(mesh_model(geo, size))
+        topo = build_topology(mesh_geometry(geo, size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_element_damping(ELEMENT_DAMPING)
     model.set_gravity(0.0, -GRAVITY)
@@ -120,9 +124,9 @@ def main(argv=None) -> dict:
     check_common(parser, args)
     set_threads(args.threads)
 
-    from fdem.analysis import slope_toe
-    from fdem.report import RunReport
-    from fdem.workflow import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
+    from fdem.geometry.polygons import slope_toe
+    from fdem.results.report import RunReport
+    from fdem.workflow.slope import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     wall = time.perf_counter()
     out = args.out

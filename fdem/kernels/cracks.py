@@ -60,26 +60,50 @@ The law (per integration point, per unit area; Munjiza 2004 ch. 7; Munjiza, Andr
 from __future__ import annotations
 
 import math
-
 import numpy as np
 from numba import njit, prange
 
+__all__ = ["EM_A", "EM_B", "EM_C", "MUNJIZA", "LINEAR", "N_CONST", "N_STATE", "N_STATE_V1", "N_DIL",
+           "UNKNOWN_TRACTION", "PARALLEL_MIN", "softening", "point_law", "element_update",
+           "update_and_scatter", "crack_forces_coloured", "crack_forces_serial", "crack_forces_store",
+           "gather_node_forces", "colour_elements", "end_separations", "crack_elastic_energy",
+           "stable_dt_kernel", "secant_stiffness", "remap_damage", "project_to_envelope"]
+
+
 # Evans-Marathe softening constants used by Munjiza (2004, ch. 7): a, b, c.
 EM_A = 0.63
+
+
 EM_B = 1.8
+
+
 EM_C = 6.0
 
+
 MUNJIZA = 0
+
+
 LINEAR = 1
 
+
 N_CONST = 8
+
+
 N_STATE = 12
+
+
 N_STATE_V1 = 8
 """State columns before joint dilation (``[D, kappa, s_pl] x 2, tau_prev x 2``): checkpoints
 written then are padded on load (``sigma_prev`` unknown, ``d = 0``)."""
+
+
 N_DIL = 2
+
+
 UNKNOWN_TRACTION = -1.0e308
 """Sentinel for "no previous shear traction stored" (a NaN test would not survive fastmath)."""
+
+
 PARALLEL_MIN = 4096
 """Below this many live elements the serial loop is used (a parallel region costs more)."""
 

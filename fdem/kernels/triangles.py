@@ -25,18 +25,39 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+__all__ = ["FASTMATH", "TC_LAM", "TC_MU", "TC_ETA", "TC_MASS", "TC_INV_MASS", "N_TRI_CONST",
+           "triangle_constants", "svk_piola", "viscous_piola", "corner_forces", "triangle_response",
+           "velocity_gradient_power", "assemble_triangle_forces", "triangle_stress_state",
+           "deformation_gradients", "TC_B00", "TC_B01", "TC_B10", "TC_B11", "TC_S0XX", "TC_S0YY", "TC_S0XY"]
+
+
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 """LLVM fast-math flags used by the kernels: everything except ``nnan``/``ninf``, so that
 NaN and infinity still propagate into the energy sums the instability guard checks."""
 
+
 # column layout of the per-triangle constants
 TC_B00, TC_B01, TC_B10, TC_B11 = 0, 1, 2, 3  # B = [X1-X0, X2-X0]^-1 [1/m]
+
+
 TC_LAM = 4  # A0 * lambda (2D, plane strain or plane stress) [N]
+
+
 TC_MU = 5  # A0 * mu [N]
+
+
 TC_ETA = 6  # A0 * eta [N s]
+
+
 TC_S0XX, TC_S0YY, TC_S0XY = 7, 8, 9  # A0 * initial 2nd Piola-Kirchhoff stress [N]
+
+
 TC_MASS = 10  # lumped mass of each corner, rho A0 / 3 [kg/m]
+
+
 TC_INV_MASS = 11  # 1 / TC_MASS
+
+
 N_TRI_CONST = 12
 
 
@@ -46,7 +67,7 @@ def triangle_constants(x0, triangles, lam, mu, eta, density, initial_stress=None
     ``lam``, ``mu``, ``eta``, ``density`` are scalars or (n_tri,) arrays [Pa, Pa, Pa s, kg/m^3];
     ``initial_stress`` is ``None`` or (n_tri, 3) ``[s_xx, s_yy, s_xy]`` [Pa].
     """
-    from ..materials import triangle_shape_gradients
+    from fdem.mesh.triangles import triangle_shape_gradients
 
     inv_dm, area = triangle_shape_gradients(np.asarray(x0, float), np.asarray(triangles))
     n = len(area)

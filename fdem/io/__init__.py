@@ -1,0 +1,4 @@
+"""Files and pictures: VTU/PVD series, the history table, state files, plain JSON, matplotlib pictures.
+
+Imports nothing else of the package (ground floor).
+"""

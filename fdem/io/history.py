@@ -1,0 +1,58 @@
+"""The history table (``history.csv``): one row per ledger check, written as the run goes."""
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+import numpy as np
+
+__all__ = ["HistoryWriter", "read_history"]
+
+
+class HistoryWriter:
+    """CSV history: header from the first row's keys; each row is appended and flushed."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.columns: list[str] | None = None
+        self._fh = None
+        self._writer = None
+
+    def write(self, row: dict) -> None:
+        if self.columns is None:
+            self.columns = list(row)
+            self._fh = open(self.path, "w", newline="")
+            self._writer = csv.writer(self._fh)
+            self._writer.writerow(self.columns)
+        extra = [k for k in row if k not in self.columns]
+        if extra:
+            raise ValueError(f"history row has columns {extra} that the header {self.columns} lacks")
+        self._writer.writerow([_fmt(row.get(c, "")) for c in self.columns])
+        self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def _fmt(value) -> str:
+    if isinstance(value, (float, np.floating)):
+        return f"{float(value):.10g}"
+    return str(value)
+
+
+def read_history(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Columns of a history CSV as arrays (numeric where possible)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    out = {}
+    for j, name in enumerate(header):
+        col = [r[j] for r in body]
+        try:
+            out[name] = np.array([float(c) for c in col])
+        except ValueError:
+            out[name] = np.array(col)
+    return out

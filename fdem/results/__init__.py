@@ -1,0 +1,2 @@
+"""Reading a run: runout, displacement and fragment statistics, events and magnitudes, the run report.
+"""

@@ -1,0 +1,160 @@
+"""What a slope run reports: ``summary.json``, time series, the event catalogue and pictures.
+
+:class:`RunReport` watches a running :class:`~fdem.solver.Simulation` through monitors (one
+value per history row: cracks broken by mode, fragments) and, at the end, writes
+
+* ``summary.json``: stages, factor of safety, runout distance and volume, displacement
+  percentiles, peak and released kinetic energy, cracks by mode, fragments and their sizes,
+  micro-seismic event statistics, the ledger error;
+* ``events.csv``: the micro-seismic catalogue (:func:`fdem.events.cluster_events`; a
+  "no events" line when nothing broke);
+* ``kinetic_energy.png``, ``cracks_by_mode.png``, ``magnitudes.png`` (when there are events),
+  ``fragments.png`` and ``failure.png`` (displacement on the deformed mesh with the broken
+  crack elements by mode, :func:`fdem.pictures.failure_frame`).
+
+The definitions (runout distance as the 99th area percentile of the reach beyond the toe,
+fragments, events) are in ``docs/outputs.md``.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+import numpy as np
+from fdem.results import analysis, events
+from fdem.io import pictures
+from fdem.solve.simulation import Simulation
+from fdem.io.jsonable import jsonable
+
+__all__ = ["RunReport"]
+
+
+class RunReport:
+    """Collect and write what a slope run reports.
+
+    Parameters
+    ----------
+    sim : the simulation (with a crack set among its providers)
+    toe_x : x of the slope toe [m] (runout is measured beyond it, toward ``toward``)
+    toward : -1 if the slope faces -x (toe on the left, the project's convention), +1 otherwise
+    floor_y : y of the floor in front of the toe [m] (deposit profile)
+    threshold : displacement [m] above which a triangle counts as displaced (default 0.1 m)
+    stress_drop : stress drop [Pa] of the micro-seismic moment (default: the mean tensile
+        strength of the crack property sets, the traction a breaking element releases)
+    fragments_every : monitor the fragment count on every history row (connected components
+        of the still-bonded triangles; about 50 ms at 1e5 triangles)
+    reference_events : magnitude statistics of a reference catalogue to compare with
+        (e.g. :data:`fdem.events.MULIASHI` for that scene), or ``None``: no comparison
+    """
+
+    def __init__(self, sim: Simulation, toe_x: float, toward: float = -1.0, floor_y: float | None = None,
+                 threshold: float = 0.1, stress_drop: float | None = None, fragments_every: bool = True,
+                 reference_events: dict | None = None):
+        self.sim = sim
+        self.cracks = sim.cracks
+        if self.cracks is None:
+            raise ValueError("RunReport needs a simulation with crack elements")
+        if not math.isfinite(toe_x):
+            raise ValueError(f"toe_x must be finite, got {toe_x}")
+        self.toe_x, self.toward, self.threshold = float(toe_x), float(toward), float(threshold)
+        self.floor_y = floor_y
+        self.reference_events = reference_events
+        if stress_drop is None:
+            stress_drop = float(np.mean([p.f_t for p in self.cracks.property_sets.values()]))
+        self.stress_drop = float(stress_drop)
+        topo = sim.model.topology
+        cracks = self.cracks
+        sim.add_monitor("broken_I", lambda s: float(np.count_nonzero(cracks.failure_mode == 1)))
+        sim.add_monitor("broken_II", lambda s: float(np.count_nonzero(cracks.failure_mode == 2)))
+        sim.add_monitor("broken_mixed", lambda s: float(np.count_nonzero(cracks.failure_mode == 3)))
+        sim.add_monitor("inelastic", lambda s: float(cracks.n_inelastic()))
+        if fragments_every:
+            self._frag_cache = (-1, 0)
+
+            def n_fragments(s):
+                n_broken = int(cracks.broken.sum())
+                if n_broken != self._frag_cache[0]:  # recount only when something broke
+                    self._frag_cache = (n_broken, int(analysis.fragments(topo, cracks.broken)[0]))
+                return float(self._frag_cache[1])
+
+            sim.add_monitor("fragments", n_fragments)
+
+    # ------------------------------------------------------------------ writing
+    def catalogue(self) -> events.EventCatalogue:
+        model = self.sim.model
+        _, mu = model.lame_arrays()
+        return events.cluster_events(self.cracks.events, shear_modulus=float(np.mean(mu)),
+                                     stress_drop=self.stress_drop,
+                                     density=float(np.mean(model.property_array("density"))))
+
+    def summary(self, extra: dict | None = None) -> dict:
+        """The figures of the run so far (a JSON-able dict)."""
+        sim, topo, cracks = self.sim, self.sim.model.topology, self.cracks
+        x = sim.state.x
+        run = analysis.runout(topo, x, self.toe_x, threshold=self.threshold, toward=self.toward)
+        frag = analysis.fragment_statistics(topo, cracks.broken)
+        hist = sim.history
+        peak = max((max(r.get("kinetic_peak", 0.0), r.get("kinetic", 0.0)) for r in hist), default=0.0)
+        cat = self.catalogue()
+        mags = cat.magnitudes if not cat.empty else np.zeros(0)
+        modes = cracks.events["mode"] if len(cracks.events) else np.array([])
+        out = {
+            "simulated_time_s": sim.state.time, "steps": sim.state.step, "dt_s": sim.dt,
+            "n_triangles": topo.n_triangles, "n_crack_elements": topo.n_cracks,
+            "runout": run,
+            "displacement": analysis.displacement_statistics(topo, x),
+            "kinetic_energy": {"peak_J_per_m": peak,
+                               "final_J_per_m": float(hist[-1]["kinetic"]) if hist else 0.0,
+                               "released_gravity_J_per_m": float(-hist[-1]["gravity_potential"]) if hist else 0.0,
+                               "fracture_J_per_m": float(hist[-1].get("fracture", 0.0)) if hist else 0.0},
+            "cracks": {"broken": int(cracks.broken.sum()), "inelastic": int(cracks.n_inelastic()),
+                       "by_mode": {m: int((modes == m).sum()) for m in ("I", "II", "mixed")}},
+            "fragments": {k: frag[k] for k in ("n_fragments", "n_single_triangles", "n_blocks", "largest_share")},
+            "events": cat.summary() if not cat.empty else {"n_events": 0, "note": "no events: nothing broke"},
+            "magnitudes": (None if mags.size < 2 else events.magnitude_statistics(mags)
+                           if self.reference_events is None
+                           else events.compare_with_reference(mags, self.reference_events)),
+            "ledger_error_relative": float(hist[-1]["balance_error_relative"]) if hist else 0.0,
+        }
+        if extra:
+            out.update(extra)
+        return jsonable(out)
+
+    def write(self, out_dir, extra: dict | None = None, pictures_on: bool = True) -> dict:
+        """Write ``summary.json``, ``events.csv`` and (``pictures_on``) the PNG plots into ``out_dir``."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        summary = self.summary(extra)
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        cat = self.catalogue()
+        events.write_catalogue_csv(out / "events.csv", cat)
+        if pictures_on:
+            self.pictures(out, cat)
+        return summary
+
+    def pictures(self, out: Path, cat=None) -> list[Path]:
+        sim, topo, cracks = self.sim, self.sim.model.topology, self.cracks
+        written = []
+        t, kin = analysis.history_columns(sim.history, "time", "kinetic_peak")
+        if t.size:
+            stage = np.array([r["stage"] for r in sim.history])
+            written.append(pictures.kinetic_energy_plot(out / "kinetic_energy.png", t, kin, stage=stage))
+        ev = cracks.events
+        written.append(pictures.crack_count_plot(out / "cracks_by_mode.png", ev["time"] if len(ev) else np.zeros(0),
+                                                 ev["mode"] if len(ev) else np.zeros(0, "U5"), t_end=sim.state.time))
+        cat = cat if cat is not None else self.catalogue()
+        if not cat.empty and len(cat.events) >= 2:
+            written.append(events.magnitude_plot(out / "magnitudes.png", cat.magnitudes,
+                                                   reference=self.reference_events))
+        frag = analysis.fragment_statistics(topo, cracks.broken)
+        if len(frag["areas"]):
+            t_f, n_f = (analysis.history_columns(sim.history, "time", "fragments")
+                        if sim.history and "fragments" in sim.history[0] else (None, None))
+            written.append(pictures.fragment_size_plot(out / "fragments.png", frag["areas"], time=t_f, count=n_f,
+                                                       stage=stage if t.size else None))
+        g = sim.crack_geometry()
+        disp = np.linalg.norm(sim.state.x - sim.x0, axis=1)
+        written.append(pictures.failure_frame(out / "failure.png", sim.state.x, topo.triangles, disp, g["points"],
+                                              cracks.broken, cracks.failure_mode,
+                                              title=f"t = {sim.state.time:.3g} s: displacement and broken crack elements"))
+        return written

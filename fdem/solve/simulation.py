@@ -1,0 +1,711 @@
+"""Time loop: stages, automatic stable time step, force providers, energy ledger, output, guard.
+
+One step (:meth:`Simulation.step`) reads like the algorithm:
+
+1. zero the interaction force array ``f_interaction`` (n_nodes, 2);
+2. every registered force provider (crack elements, contact, ...) adds its forces at
+   ``x_n``: ``provider.add_forces(x, v, f_interaction, dt, step)``;
+3. one fused kernel computes every triangle's internal force and advances its own nodes
+   (central differences with gravity, external loads, supports, prescribed velocities,
+   damping): :func:`fdem.kernels.integration.step_exploded` (a conforming mesh takes the
+   two-pass :func:`~fdem.kernels.integration.triangle_pass` + :func:`~fdem.kernels.integration.node_pass`).
+
+Force providers
+---------------
+Any object with ``add_forces(x, v, f_interaction, dt, step) -> None`` (add, never assign,
+forces [N/m] into ``f_interaction``; ``x`` (n_nodes, 2) are positions at step ``n``, ``v``
+velocities at ``n - 1/2``). Optional methods the solver uses when present:
+
+* ``energy_terms() -> dict[str, float]``: energies [J/m] the provider holds or has dissipated
+  (e.g. ``{"crack_elastic": ..., "fracture": ...}``), each a column of the ledger and a
+  term of its balance;
+* ``stable_dt(mass) -> float``: the critical step [s] of the provider's own stiffness on the
+  lumped node masses ``mass`` (n_nodes,) [kg/m], e.g. ``min h sqrt(rho / p)`` for a penalty
+  ``p``; combined with the triangles' as ``1 / sqrt(sum 1 / dt_i^2)``;
+* ``crack_fields() -> dict[str, ndarray]``: (n_crack,) arrays (``damage``, ``broken``, ...)
+  written on the crack line cells.
+
+Energy ledger
+-------------
+Every history row holds ``kinetic``, ``strain``, ``gravity_potential`` ``-sum m g.(x - x_0)``,
+``load_potential`` ``-sum f_ext.(x - x_0)``, ``damping_dissipation``, ``viscous_dissipation``,
+``boundary_work`` (work done on the body by supports and prescribed velocities),
+``interaction_work`` (work done on the body by the providers' forces, a cross-check),
+one column per provider energy term, ``total = kinetic + strain + potentials + provider
+terms + dissipations - boundary_work`` and ``balance_error = total - total at the first
+record``. With the half-step bookkeeping of :mod:`fdem.kernels.integration` the balance is
+exact for linear forces; what remains measures nonlinearity, round-off and provider errors.
+If a provider has no ``energy_terms``, its energy is taken as ``-interaction_work``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Protocol, runtime_checkable
+import numpy as np
+from fdem.kernels.stepping import (LEDGER_FIELDS, n_blocks, node_pass, step_exploded, step_exploded_elastic, triangle_pass, viscous_power)
+from fdem.kernels.triangles import assemble_triangle_forces, triangle_stress_state
+from fdem.physics.elastic import PLANE_STRAIN
+from fdem.physics.stability import combine_stable_dt
+from fdem.physics.contact import ContactSet
+from fdem.physics.cracks import CrackSet
+from fdem.solve.model import Model
+from fdem.io import vtk as out
+from fdem.io import npz as npz
+from fdem.io import history as history_file
+from fdem.physics import elastic as elastic
+from fdem.solve.damping import Damping, NO_DAMPING
+from fdem.solve.ledger import EnergyLedger
+
+__all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation"]
+
+
+@runtime_checkable
+class ForceProvider(Protocol):
+    """Anything that adds interaction forces (crack elements, contact); see the module docstring."""
+
+    def add_forces(self, x: np.ndarray, v: np.ndarray, f_interaction: np.ndarray, dt: float, step: int) -> None:
+        ...
+
+
+@dataclass
+class State:
+    """The solver state, a struct of arrays.
+
+    Attributes
+    ----------
+    x : (n_nodes, 2) float64
+        Positions at ``time`` [m].
+    v : (n_nodes, 2) float64
+        Velocities at ``time - dt/2`` (leapfrog) [m/s].
+    mass : (n_nodes,) float64
+        Lumped masses [kg/m].
+    time : float
+        [s].
+    step : int
+        Steps taken.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    mass: np.ndarray
+    time: float = 0.0
+    step: int = 0
+
+    def copy(self) -> "State":
+        return State(self.x.copy(), self.v.copy(), self.mass, self.time, self.step)
+
+
+class InstabilityError(RuntimeError):
+    """The run went unstable; the message says where, when, and what time step to try.
+
+    Attributes: ``step``, ``time``, ``triangle``, ``reason``, ``suggested_dt``, ``state_path``.
+    """
+
+    def __init__(self, message: str, step: int, time: float, triangle: int, reason: str,
+                 suggested_dt: float, state_path: Path | None):
+        super().__init__(message)
+        self.step, self.time, self.triangle, self.reason = step, time, triangle, reason
+        self.suggested_dt, self.state_path = suggested_dt, state_path
+
+
+def provider_crack_fields(provider, n_cracks: int) -> dict[str, np.ndarray]:
+    """(n_crack,) arrays a provider supplies for the crack line cells: ``crack_fields()`` if it
+    has one, else its ``damage`` and ``broken`` attributes when they have one value per crack."""
+    fn = getattr(provider, "crack_fields", None)
+    if fn is not None:
+        return dict(fn())
+    found = {}
+    for name in ("damage", "broken"):
+        try:
+            value = getattr(provider, name, None)
+        except Exception:  # a property that cannot be evaluated yet
+            value = None
+        if isinstance(value, np.ndarray) and value.shape == (n_cracks,):
+            found[name] = value
+    return found
+
+
+class Simulation:
+    """An explicit FDEM simulation of a :class:`~fdem.model.Model`, run in stages.
+
+    Parameters
+    ----------
+    model : Model
+    dt : float, optional
+        Time step [s]; default ``safety`` times the critical step. A value above the critical
+        step is refused with a ``ValueError`` that states the stable value.
+    safety : float
+        Fraction of the critical step used when ``dt`` is automatic (default 0.8).
+    out_dir : path, optional
+        Where ``<name>.pvd``, ``<name>_cracks.pvd``, ``history.csv``, pictures and state files
+        go; ``None`` writes nothing.
+    name : str
+        Base name of the output series.
+    progress : bool
+        Show a tqdm progress bar in :meth:`run`.
+    pictures : bool
+        Render a PNG with every output frame: displacement magnitude on the deformed mesh and
+        the broken crack elements by failure mode (:func:`fdem.pictures.failure_frame`).
+    providers : sequence of force providers (see the module docstring).
+    output_fields : sequence of str, optional
+        Point/cell arrays written to the triangle frames (default all: ``displacement``,
+        ``velocity``, the stresses, ``property``, ``body``); fewer fields, smaller frames.
+    compression : ``None`` (raw, default: fastest to write), ``"zlib"`` or ``"lzma"``
+        Block compression of every VTU frame (``docs/outputs.md``: zlib keeps 62 % of the bytes
+        of a 180k-triangle frame at about 13 times the write time).
+    """
+
+    def __init__(self, model: Model, dt: float | None = None, safety: float = 0.8, out_dir=None,
+                 name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
+                 output_fields=None, compression: str | None = None):
+        if not 0.0 < safety <= 1.0:
+            raise ValueError(f"safety factor must lie in (0, 1], got {safety}")
+        self.model = model
+        self.safety = safety
+        self.user_dt = dt
+        self.out_dir = Path(out_dir) if out_dir is not None else None
+        self.name = name
+        self.progress = progress
+        self.pictures = pictures
+        self.providers: list = []
+        self.cracks: CrackSet | None = None  # the crack-element set among the providers, if any
+        self.contact: ContactSet | None = None  # the contact set among the providers, if any
+        self.monitors: dict[str, Callable[["Simulation"], float]] = {}
+        topo = model.topology
+        self.x0 = np.ascontiguousarray(topo.x0, dtype=np.float64)
+        self.triangles = np.ascontiguousarray(topo.triangles, dtype=np.int64)
+        self.tc = model.triangle_constants()
+        self.state = State(x=self.x0.copy(), v=np.ascontiguousarray(model.initial_velocity, dtype=np.float64).copy(),
+                           mass=model.node_mass())
+        self.flags = model.flags.copy()
+        self.v_prescribed = model.v_prescribed.copy()
+        self.f_interaction = np.zeros((model.n_nodes, 2))
+        self.f_external = np.ascontiguousarray(model.external_force, dtype=np.float64)
+        self.use_external = model.has_external_force
+        self.gravity = model.gravity.astype(float).copy()
+        self.use_viscous = bool(np.any(model.viscosity_array() > 0))
+        self.exploded = model.is_exploded
+        if not self.exploded:
+            self._csr = model.node_corner_csr()
+            self._corner_force = np.zeros((3 * model.n_triangles, 2))
+            self._viscous_stress = np.zeros((model.n_triangles, 4))
+        self._empty = np.zeros((1, 2))
+        self._partial = np.zeros((n_blocks(model.n_triangles), len(LEDGER_FIELDS)))
+        self.triangle_dt = float(model.triangle_critical_dt().min())
+        grav_moment = self.state.mass[:, None] * self.gravity * self.x0
+        ext_moment = self.f_external * self.x0
+        # the potentials are differences of sums over absolute positions: their round-off
+        # sets a floor under the energy scale
+        roundoff = 1e-13 * float(np.abs(grav_moment).sum() + np.abs(ext_moment).sum())
+        self.ledger = EnergyLedger(float(grav_moment.sum()), float(ext_moment.sum()), roundoff)
+        self.history: list[dict] = []
+        self._history_writer = history_file.HistoryWriter(self.out_dir / "history.csv") if self.out_dir else None
+        if compression not in (None, "zlib", "lzma"):
+            raise ValueError(f"compression must be None, 'zlib' or 'lzma', got {compression!r}")
+        self._series = (out.PvdSeries(self.out_dir, name, compression=compression,
+                                      fields=None if output_fields is None else list(output_fields))
+                        if self.out_dir else None)
+        self._crack_series = (out.PvdSeries(self.out_dir, f"{name}_cracks", compression=compression)
+                              if self.out_dir and topo.n_cracks > 0 else None)
+        self._frames = 0
+        self._stage = ""
+        self._good = self.state.copy()
+        self._provider_terms: tuple[dict[str, float], bool] = ({}, True)
+        self.last_row: dict | None = None
+        self.kinetic_peak = 0.0  # largest kinetic energy of any step since the last history row
+        for p in providers:
+            self.add_provider(p)
+        self.dt = self._choose_dt()
+        self.add_monitor("max_speed", lambda s: float(np.sqrt((s.state.v ** 2).sum(1)).max()))
+        self.add_monitor("max_displacement", lambda s: float(np.sqrt(((s.state.x - s.x0) ** 2).sum(1)).max()))
+
+    # ------------------------------------------------------------------ setup
+    def add_provider(self, provider) -> None:
+        """Register a force provider (called in registration order every step)."""
+        if not callable(getattr(provider, "add_forces", None)):
+            raise TypeError(f"{provider!r} has no add_forces(x, v, f_interaction, dt, step) method")
+        if isinstance(provider, CrackSet):
+            if self.cracks is not None:
+                raise ValueError("a simulation takes one CrackSet; this one already has one")
+            if self.contact is not None:
+                raise ValueError("register the CrackSet before the ContactSet: contact reads the faces "
+                                 "that the crack elements break in the same step")
+            self.cracks = provider
+        elif isinstance(provider, ContactSet):
+            if self.contact is not None:
+                raise ValueError("a simulation takes one ContactSet; this one already has one")
+            self.contact = provider
+        self.providers.append(provider)
+        if hasattr(self, "dt"):
+            self.dt = self._choose_dt()
+
+    def add_monitor(self, name: str, fn: Callable[["Simulation"], float]) -> None:
+        """Record ``fn(sim)`` as column ``name`` of every history row."""
+        self.monitors[name] = fn
+
+    def critical_dt(self) -> tuple[float, dict[str, float]]:
+        """The critical (stability limit) step [s] and the limits it combines, by source."""
+        limits = {"triangles": self.triangle_dt}
+        for p in self.providers:
+            fn = getattr(p, "stable_dt", None)
+            if fn is not None:
+                limits[type(p).__name__] = float(fn(self.state.mass))
+        return combine_stable_dt(*limits.values()), limits
+
+    def _choose_dt(self) -> float:
+        crit, limits = self.critical_dt()
+        if self.user_dt is None:
+            return self.safety * crit
+        if not self.user_dt > 0:
+            raise ValueError(f"time step must be positive, got {self.user_dt}")
+        if self.user_dt > crit:
+            parts = ", ".join(f"{k} {v:.6g} s" for k, v in limits.items())
+            raise ValueError(
+                f"time step {self.user_dt:.6g} s exceeds the stable time step {crit:.6g} s "
+                f"(critical step combining: {parts}); use dt <= {crit:.6g} s, or dt=None for the "
+                f"automatic {self.safety * crit:.6g} s (safety factor {self.safety})")
+        return float(self.user_dt)
+
+    def set_gravity(self, gx: float, gy: float) -> None:
+        """Change gravity [m/s^2] during a run (a gravity-increase trigger), keeping the ledger closed.
+
+        The potential energy ``-sum m g . (x - x0)`` jumps at fixed positions by
+        ``-sum m (g_new - g_old) . (x - x0)``: that is work done on the system by the change,
+        booked in the ledger as ``gravity_change_work`` (like the work of supports). Masses do not
+        change: a gravity factor ``k`` loads the slope as a density factor ``k`` would in statics,
+        with the dynamics of the real mass.
+        """
+        g_new = np.array([gx, gy], dtype=float)
+        if not np.all(np.isfinite(g_new)):
+            raise ValueError(f"gravity must be finite, got ({gx}, {gy}) m/s^2")
+        dg = g_new - self.gravity
+        m = self.state.mass[:, None]
+        self.ledger.gravity_change_work += -float((m * dg * (self.state.x - self.x0)).sum())
+        self.ledger.gravity_moment0 = float((m * g_new * self.x0).sum())
+        self.gravity = g_new
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, damping: Damping = NO_DAMPING, ledger: bool = False) -> tuple:
+        """Advance one step; returns the kernel sums (see :data:`fdem.kernels.integration.LEDGER_FIELDS`).
+
+        With ``ledger=True`` the step also records a history row (energies at the state
+        before the step, monitors after it) in :attr:`history` and ``history.csv``.
+        """
+        st = self.state
+        x, v, dt = st.x, st.v, self.dt
+        use_int = bool(self.providers)
+        if use_int:
+            f_int = self.f_interaction
+            f_int.fill(0.0)
+            for p in self.providers:
+                p.add_forces(x, v, f_int, dt, st.step)
+            if ledger:  # provider energies at x_n, before the kernel moves the nodes
+                self._provider_terms = self._collect_provider_terms()
+        else:
+            f_int = self._empty
+        if self.model.has_time_dependent_velocity:
+            self.model.update_prescribed_velocity(self.v_prescribed, st.time + 0.5 * dt)
+        f_ext = self.f_external if self.use_external else self._empty
+        gx, gy = self.gravity
+        alpha, local = damping.mass_proportional, damping.local
+        damped = alpha != 0.0 or local != 0.0
+        if self.exploded and not (ledger or self.use_viscous or self.use_external):
+            # fast path (most steps of a dynamic or damped stage): no state energies needed
+            r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
+                x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
+                self.flags, self.v_prescribed, gx, gy, dt, self._partial)
+            sums = (0.0, kin, 0.0, 0.0, d_e, d_l, 0.0, 0.0, r_e, r_l, i_e, i_l, n_bad)
+        elif self.exploded:
+            sums = step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
+                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous, ledger,
+                                 self._partial)
+        else:
+            ptr, corners = self._csr
+            strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
+                                                self._viscous_stress, self.use_viscous)
+            kin, gm, em, d_e, d_l, r_e, r_l, i_e, i_l = node_pass(
+                x, v, st.mass, ptr, corners, self._corner_force, f_int, use_int, f_ext, self.use_external,
+                self.flags, self.v_prescribed, gx, gy, dt, alpha, local, ledger)
+            v_e = v_l = 0.0
+            if self.use_viscous:
+                v_e = 0.5 * dt * rate
+                v_l = 0.5 * dt * viscous_power(v, self.triangles, self.tc, self._viscous_stress)
+            sums = (strain, kin, gm, em, d_e, d_l, v_e, v_l, r_e, r_l, i_e, i_l, n_bad)
+        step_before, time_before = st.step, st.time
+        if self.exploded or ledger:  # the exploded kernels sum the kinetic energy every step
+            self.kinetic_peak = max(self.kinetic_peak, float(sums[1]))
+        st.step += 1
+        st.time += dt
+        if ledger:
+            self.last_row = self._record(sums, step_before, time_before)
+        else:
+            self.ledger.add_step(*self._halves(sums))
+        return sums
+
+    # ------------------------------------------------------------------ running
+    def run(self, n_steps: int | None = None, t_end: float | None = None, damping: Damping | None = None,
+            output_every: int | None = None, history_every: int | None = None, stage: str | None = None,
+            energy_tolerance: float | None = 0.05, checkpoint_every: int = 100,
+            stop_when: Callable[["Simulation"], bool] | None = None, progress: bool | None = None,
+            final_output: bool = True) -> "Simulation":
+        """Run one stage: ``n_steps`` steps, or until time ``t_end`` [s].
+
+        Parameters
+        ----------
+        damping : Damping, optional
+            Quasi-static damping of this stage; default none (dynamic).
+        output_every : int, optional
+            Steps between output frames (VTU, crack VTU, PNG); default: 10 frames per stage.
+        history_every : int, optional
+            Steps between ledger/history rows; default ``output_every``.
+        energy_tolerance : float or None
+            The run stops as unstable when the balance error exceeds this fraction of the
+            energy scale (energy created without work); ``None`` disables the check.
+        checkpoint_every : int
+            Steps between in-memory copies of the last good state (written on failure).
+        stop_when : callable, optional
+            ``stop_when(sim) -> bool`` checked on history steps; True ends the stage early. The
+            stage runner (:mod:`fdem.stages`) checks its end rules through it.
+        progress : bool, optional
+            Override the simulation's progress-bar setting for this call.
+        final_output : bool
+            Write an output frame when the call ends (default True).
+        """
+        damping = damping or NO_DAMPING
+        self._stage = stage or f"stage{len({r['stage'] for r in self.history}) + 1}"
+        self.dt = self._choose_dt()
+        if (n_steps is None) == (t_end is None):
+            raise ValueError("run: give exactly one of n_steps and t_end")
+        if n_steps is None:
+            n_steps = max(0, int(math.ceil((t_end - self.state.time) / self.dt - 1e-9)))
+        output_every = max(1, output_every or max(1, n_steps // 10))
+        history_every = max(1, history_every or output_every)
+        if self._frames == 0:
+            self.write_output()
+        bar = None
+        if self.progress if progress is None else progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)
+        bar_chunk = 0
+        try:
+            for k in range(n_steps):
+                is_ledger = (k % history_every == 0) or k == n_steps - 1
+                step_before, time_before = self.state.step, self.state.time
+                sums = self.step(damping, ledger=is_ledger)
+                self._check(sums, step_before, time_before, is_ledger, energy_tolerance)
+                if is_ledger:
+                    row = self.last_row
+                    if energy_tolerance is not None and row["balance_error"] > energy_tolerance * max(
+                            self.ledger.scale, 1e-300) and row["balance_error"] > 0 and step_before > 0:
+                        self._fail(step_before, time_before, "energy growing without work "
+                                   f"(balance error {row['balance_error']:.3g} J/m, "
+                                   f"{100 * row['balance_error_relative']:.2g} % of the energy scale)", None)
+                    if stop_when is not None and stop_when(self):
+                        break
+                if (k + 1) % checkpoint_every == 0:
+                    self._good = self.state.copy()
+                if (k + 1) % output_every == 0 and k + 1 < n_steps:
+                    self.write_output()
+                if bar is not None:
+                    bar_chunk += 1
+                    if bar_chunk >= 64:
+                        bar.update(bar_chunk)
+                        bar_chunk = 0
+            if final_output:
+                self.write_output()
+        except KeyboardInterrupt:
+            self._write_state("interrupted_state", self.state)
+            raise
+        finally:
+            if bar is not None:
+                bar.update(bar_chunk)
+                bar.close()
+        return self
+
+    def _halves(self, sums) -> tuple[dict, dict]:
+        keys = ("damping_dissipation", "viscous_dissipation", "boundary_work", "interaction_work")
+        early = dict(zip(keys, (sums[4], sums[6], sums[8], sums[10])))
+        late = dict(zip(keys, (sums[5], sums[7], sums[9], sums[11])))
+        return early, late
+
+    def _record(self, sums, step: int, time: float) -> dict:
+        early, late = self._halves(sums)
+        terms, complete = self._provider_terms if self.providers else ({}, True)
+        ledger = self.ledger.record(sums[1], sums[0], sums[2], sums[3], early, terms, complete)
+        self.ledger.add_step(early, late)
+        row = {"stage": self._stage, "step": int(step), "time": float(time), "dt": float(self.dt)}
+        row.update(ledger)
+        # kinetic energy's peak over the steps since the previous row (every step is summed):
+        # the history's peak is right even when rows are sparse
+        row["kinetic_peak"] = max(self.kinetic_peak, float(row["kinetic"]))
+        self.kinetic_peak = 0.0
+        for name, fn in self.monitors.items():
+            row[name] = fn(self)
+        self.history.append(row)
+        if self._history_writer is not None:
+            self._history_writer.write(row)
+        return row
+
+    def _collect_provider_terms(self) -> tuple[dict[str, float], bool]:
+        terms: dict[str, float] = {}
+        complete = True
+        for p in self.providers:
+            fn = getattr(p, "energy_terms", None)
+            if fn is None:
+                complete = False
+                continue
+            for name, value in fn().items():
+                terms[name] = terms.get(name, 0.0) + float(value)
+        return terms, complete
+
+    # ------------------------------------------------------------------ guard
+    def _check(self, sums, step: int, time: float, is_ledger: bool, energy_tolerance) -> None:
+        n_bad = sums[12]
+        if n_bad > 0:
+            self._fail(step, time, f"{n_bad} inverted or non-finite triangle(s)", None)
+        if is_ledger and not (math.isfinite(sums[0]) and math.isfinite(sums[1])):
+            self._fail(step, time, "non-finite energy (NaN or infinity in the state)", None)
+
+    def _fail(self, step: int, time: float, reason: str, triangle: int | None) -> None:
+        x = self.state.x
+        stress = np.empty((self.model.n_triangles, 6))
+        with np.errstate(all="ignore"):
+            triangle_stress_state(x, self.state.v, self.triangles, self.tc, stress)
+            jac = stress[:, 4]
+            bad = np.flatnonzero(~(jac > 0))
+            if triangle is None:
+                if bad.size:  # the most inverted (NaN counts as most)
+                    triangle = int(bad[np.argmin(np.nan_to_num(jac[bad], nan=-np.inf))])
+                else:
+                    speed = np.nan_to_num(np.sqrt((self.state.v ** 2).sum(1)), nan=np.inf)
+                    node = int(np.argmax(speed))
+                    triangle = int(np.flatnonzero((self.triangles == node).any(1))[0])
+        where = self.x0[self.triangles[triangle]].mean(0)
+        crit, _ = self.critical_dt()
+        suggested = 0.5 * min(self.dt, self.safety * crit)
+        path = self._write_state("last_good_state", self._good)
+        saved = (f"; last good state (step {self._good.step}, t = {self._good.time:.6g} s) written to {path}"
+                 if path else "")
+        msg = (f"unstable at step {step}, t = {time:.6g} s: {reason}; first bad triangle {triangle} "
+               f"near reference point ({where[0]:.4g}, {where[1]:.4g}) m{saved}. "
+               f"Time step {self.dt:.4g} s; try dt <= {suggested:.4g} s, check the stable_dt of the "
+               f"force providers and the penalties")
+        raise InstabilityError(msg, step, time, triangle, reason, suggested, path)
+
+    def _write_state(self, stem: str, state: State) -> Path | None:
+        if self.out_dir is None:
+            return None
+        path = npz.save_state(self.out_dir / f"{stem}.npz", x=state.x, v=state.v, mass=state.mass, x0=self.x0,
+                              triangles=self.triangles, time=state.time, step=state.step, dt=self.dt)
+        fields = self.fields(state)
+        out.write_vtu(self.out_dir / f"{stem}.vtu", state.x, self.triangles,
+                      point_data=fields["point"], cell_data=fields["cell"])
+        return path
+
+    # ------------------------------------------------------------------ results
+    def stresses(self, state: State | None = None) -> dict[str, np.ndarray]:
+        """(n_tri,) Cauchy stresses [Pa]: ``xx, yy, xy, zz`` (plane strain ``lambda tr(E) + s0_zz``),
+        principal ``s1 >= s2`` (in plane), ``von_mises``, ``J`` and strain-energy density [J/m^3]."""
+        state = state or self.state
+        s = np.empty((self.model.n_triangles, 6))
+        triangle_stress_state(state.x, state.v, self.triangles, self.tc, s)
+        lam, _ = self.model.lame_arrays()
+        szz = (lam * s[:, 3] if self.model.plane == PLANE_STRAIN else 0.0) + self.model.out_of_plane_initial_stress()
+        szz = np.broadcast_to(szz, (self.model.n_triangles,))
+        s1, s2 = elastic.principal_stresses(s[:, 0], s[:, 1], s[:, 2])
+        return {"xx": s[:, 0], "yy": s[:, 1], "xy": s[:, 2], "zz": np.array(szz), "principal_1": s1,
+                "principal_2": s2, "von_mises": elastic.von_mises(s[:, 0], s[:, 1], s[:, 2], szz),
+                "J": s[:, 4], "energy_density": s[:, 5]}
+
+    def reaction_force(self, nodes: np.ndarray) -> np.ndarray:
+        """Total force (2,) [N/m] that supports or prescribed velocities exert on ``nodes``.
+
+        For a node held at zero acceleration the support supplies ``R = -(f_triangle +
+        f_interaction + f_ext + m g)``; triangle forces are evaluated at the current positions,
+        interaction forces are those of the last step. The platen load of a test is minus the
+        reaction summed over the platen's nodes.
+        """
+        nodes = np.asarray(nodes, dtype=np.int64)
+        st = self.state
+        if self.exploded:
+            tris = np.unique(nodes // 3)
+            corner = np.zeros((3 * len(tris), 2))
+            sub_tc = np.ascontiguousarray(self.tc[tris])
+            sub_tri = np.arange(3 * len(tris), dtype=np.int64).reshape(-1, 3)
+            assemble_triangle_forces(st.x[self.triangles[tris]].reshape(-1, 2),
+                                     st.v[self.triangles[tris]].reshape(-1, 2), sub_tri, sub_tc, corner)
+            pos = np.searchsorted(self.triangles[tris].ravel(), nodes)
+            f_tri = corner[pos]
+        else:
+            corner = np.zeros((3 * self.model.n_triangles, 2))
+            assemble_triangle_forces(st.x, st.v, self.triangles, self.tc, corner)
+            f_all = np.zeros_like(st.x)
+            np.add.at(f_all, self.triangles.ravel(), corner)
+            f_tri = f_all[nodes]
+        f = f_tri + st.mass[nodes, None] * self.gravity
+        if self.providers:
+            f = f + self.f_interaction[nodes]
+        if self.use_external:
+            f = f + self.f_external[nodes]
+        return -f.sum(axis=0)
+
+    def fields(self, state: State | None = None) -> dict[str, dict[str, np.ndarray]]:
+        """Point and cell arrays written to the VTU files."""
+        state = state or self.state
+        s = self.stresses(state)
+        point = {"displacement": state.x - self.x0, "velocity": state.v}
+        cell = {f"stress_{k}": s[k] for k in ("xx", "yy", "xy", "zz", "principal_1", "principal_2", "von_mises")}
+        cell["property"] = self.model.triangle_property
+        cell["body"] = np.asarray(self.model.topology.triangle_body, np.int32)
+        return {"point": point, "cell": cell}
+
+    def crack_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:
+        """Line-cell points (2 per crack element, midpoints of its coincident node pairs), mean
+        normal opening and slip [m] of every crack element (see :mod:`fdem.topology` for the order).
+
+        The frame is the crack law's: the tangent of the mid-line ``t = (m1 - m0)/|m1 - m0|``
+        with ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``. These are the geometric opening and slip
+        of the element; the law also subtracts the preload offsets of a static start."""
+        state = state or self.state
+        cn = self.model.topology.crack_nodes
+        x = state.x
+        a = 0.5 * (x[cn[:, 0]] + x[cn[:, 3]])
+        b = 0.5 * (x[cn[:, 1]] + x[cn[:, 2]])
+        t = b - a
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
+        n = np.column_stack([t[:, 1], -t[:, 0]])
+        gap = 0.5 * ((x[cn[:, 3]] - x[cn[:, 0]]) + (x[cn[:, 2]] - x[cn[:, 1]]))
+        return {"points": np.stack([a, b], axis=1).reshape(-1, 2), "opening": (gap * n).sum(1),
+                "slip": (gap * t).sum(1)}
+
+    def write_output(self) -> None:
+        """Write one output frame (triangles VTU, crack VTU, optional PNG) of the current state."""
+        if self.out_dir is None:
+            self._frames += 1
+            return
+        f = self.fields()
+        self._series.write(self.state.time, self.state.x, self.triangles, out.VTK_TRIANGLE, f["point"], f["cell"])
+        if self._crack_series is not None:
+            topo = self.model.topology
+            g = self.crack_geometry()
+            cell = {"crack_tag": topo.crack_tag, "opening": g["opening"], "slip": g["slip"]}
+            for p in self.providers:
+                cell.update(provider_crack_fields(p, topo.n_cracks))
+            lines = np.arange(2 * topo.n_cracks, dtype=np.int64).reshape(-1, 2)
+            self._crack_series.write(self.state.time, g["points"], lines, out.VTK_LINE, None, cell)
+        if self.pictures:
+            self._picture()
+        self._frames += 1
+
+    def _picture(self) -> None:
+        """PNG of the frame: displacement magnitude on the deformed mesh with the broken crack
+        elements coloured by failure mode (how a rock engineer reads a failure)."""
+        from fdem.io.pictures import failure_frame
+
+        topo = self.model.topology
+        disp = np.linalg.norm(self.state.x - self.x0, axis=1)
+        segments = broken = mode = None
+        if topo.n_cracks:
+            fields: dict = {}
+            for p in self.providers:
+                fields.update(provider_crack_fields(p, topo.n_cracks))
+            if "broken" in fields:
+                segments = self.crack_geometry()["points"]
+                broken = np.asarray(fields["broken"], bool)
+                mode = fields.get("failure_mode")
+        failure_frame(self.out_dir / f"{self.name}_{self._frames:05d}.png", self.state.x, self.triangles, disp,
+                      segments, broken, mode, title=f"{self._stage} t = {self.state.time:.4g} s")
+
+    def close(self) -> None:
+        if self._history_writer is not None:
+            self._history_writer.close()
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        """Everything a restart needs, copied (:mod:`fdem.checkpoint` saves it to disk).
+
+        The state (``x``, ``v``, ``time``, ``step``; the masses are derived), support flags,
+        prescribed velocities, gravity, the last interaction forces, the energy ledger, the
+        history rows, the output frame count, stage name, provider energies of the last
+        ledger step, the last history row, the time step, the last good state (written on
+        failure) and each provider's ``state_dict()`` in registration order. A provider
+        without ``state_dict`` is an error naming it."""
+        missing = [f"{i}: {type(p).__name__}" for i, p in enumerate(self.providers)
+                   if not callable(getattr(p, "state_dict", None))]
+        if missing:
+            raise TypeError(f"force provider(s) without state_dict() cannot be checkpointed: {', '.join(missing)}")
+        led = self.ledger
+        terms, complete = self._provider_terms
+        return {
+            "x": self.state.x.copy(), "v": self.state.v.copy(), "time": float(self.state.time),
+            "step": int(self.state.step), "flags": self.flags.copy(), "v_prescribed": self.v_prescribed.copy(),
+            "gravity": self.gravity.copy(), "f_interaction": self.f_interaction.copy(),
+            "ledger": {"done": dict(led.done), "first_early": None if led.first_early is None else dict(led.first_early),
+                       "total0": led.total0, "scale": float(led.scale), "last": dict(led.last),
+                       "gravity_moment0": float(led.gravity_moment0),
+                       "external_moment0": float(led.external_moment0),
+                       "gravity_change_work": float(led.gravity_change_work)},
+            "kinetic_peak": float(self.kinetic_peak),
+            "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
+            "provider_terms": [dict(terms), bool(complete)],
+            "last_row": None if self.last_row is None else dict(self.last_row), "dt": float(self.dt),
+            "good": {"x": self._good.x.copy(), "v": self._good.v.copy(), "time": float(self._good.time),
+                     "step": int(self._good.step)},
+            "providers": [p.state_dict() for p in self.providers],
+        }
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` output into a simulation of the same model and providers.
+
+        Arrays are written into the existing ones (providers keep their references to
+        ``state.x``); the history list is replaced by the saved rows (truncated or extended
+        to them); rows already written to ``history.csv`` stay there."""
+        n = self.model.n_nodes
+        if np.shape(d["x"]) != (n, 2):
+            raise ValueError(f"saved state has positions of shape {np.shape(d['x'])}, this model has ({n}, 2)")
+        saved = d["providers"]
+        if len(saved) != len(self.providers):
+            raise ValueError(f"saved state has {len(saved)} force provider(s), this simulation {len(self.providers)}")
+        for i, (p, s) in enumerate(zip(self.providers, saved)):
+            kind = s.get("kind") if isinstance(s, dict) else None
+            if kind is not None and kind != type(p).__name__:
+                raise ValueError(f"force provider {i} was a {kind} when saved, here it is a {type(p).__name__}")
+        st = self.state
+        st.x[:] = d["x"]
+        st.v[:] = d["v"]
+        st.time = float(d["time"])
+        st.step = int(d["step"])
+        self.flags[:] = d["flags"]
+        self.v_prescribed[:] = d["v_prescribed"]
+        self.gravity[:] = d["gravity"]
+        self.f_interaction[:] = d["f_interaction"]
+        led, s = self.ledger, d["ledger"]
+        led.done = dict(s["done"])
+        led.first_early = None if s["first_early"] is None else dict(s["first_early"])
+        led.total0 = None if s["total0"] is None else float(s["total0"])
+        led.scale = float(s["scale"])
+        led.last = dict(s["last"])
+        led.gravity_moment0 = float(s["gravity_moment0"])
+        led.external_moment0 = float(s["external_moment0"])
+        led.gravity_change_work = float(s.get("gravity_change_work", 0.0))
+        self.kinetic_peak = float(d.get("kinetic_peak", 0.0))
+        self.history[:] = [dict(r) for r in d["history"]]
+        self._frames = int(d["frames"])
+        self._stage = str(d["stage"])
+        terms, complete = d["provider_terms"]
+        self._provider_terms = (dict(terms), bool(complete))
+        self.last_row = None if d["last_row"] is None else dict(d["last_row"])
+        self.dt = float(d["dt"])
+        g = d["good"]
+        self._good = State(np.array(g["x"], dtype=np.float64), np.array(g["v"], dtype=np.float64), st.mass,
+                           float(g["time"]), int(g["step"]))
+        import inspect
+
+        for p, s in zip(self.providers, saved):
+            if "x" in inspect.signature(p.load_state_dict).parameters:
+                p.load_state_dict(s, x=st.x)
+            else:
+                p.load_state_dict(s)

@@ -1,0 +1,325 @@
+"""Factor of safety: strength reduction and gravity increase as triggers, and the bisection search.
+
+:func:`factor_of_safety` brackets the smallest reduction factor ``F`` (or gravity factor) at
+which the slope fails, running one trial stage per factor from the same saved state
+(optionally in a process pool); it returns a :class:`FoSResult`."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+import numpy as np
+from fdem.solve.damping import Damping
+from fdem.solve.simulation import Simulation
+from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, response_time, run_stage
+
+__all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "fundamental_damping",
+           "default_trial_stage", "factor_of_safety"]
+
+
+def _interfaces(sim):
+    """The strength-reduction home of ``sim``'s crack elements; a ``ValueError`` if it has none."""
+    if sim.cracks is None:
+        raise ValueError("this simulation has no crack elements (CrackSet): no strength to reduce")
+    return sim.cracks.interfaces
+
+
+# ----------------------------------------------------------------------------- factor of safety
+class StrengthReduction:
+    """Trigger of the factor-of-safety search: the strength-reduction factor ``F``
+    (:meth:`fdem.interfaces.Interfaces.set_reduction`); larger ``F`` is weaker."""
+
+    name = "strength reduction"
+
+    def apply(self, sim: Simulation, factor: float) -> None:
+        _interfaces(sim).set_reduction(factor)
+
+    def reset(self, sim: Simulation, factor: float) -> None:
+        _interfaces(sim).set_reduction(factor)
+
+    def current(self, sim: Simulation) -> float:
+        return _interfaces(sim).reduction
+
+
+class GravityIncrease:
+    """Trigger of the factor-of-safety search: gravity multiplied by the factor ``k`` (larger
+    is heavier), from the model's gravity, as the Muliashi study raises the density ten-fold
+    (``shared/cases.md`` B). The critical gravity factor is the factor of safety against
+    self-weight. :meth:`fdem.solver.Simulation.set_gravity` books each change in the ledger."""
+
+    name = "gravity increase"
+
+    def __init__(self, base_gravity=None):
+        self.base = None if base_gravity is None else np.asarray(base_gravity, float)
+
+    def _base(self, sim: Simulation) -> np.ndarray:
+        if self.base is None:
+            self.base = np.asarray(sim.model.gravity, float).copy()
+            if not np.any(self.base):
+                raise ValueError("gravity increase: the model has no gravity to multiply")
+        return self.base
+
+    def apply(self, sim: Simulation, factor: float) -> None:
+        sim.set_gravity(*(factor * self._base(sim)))
+
+    def reset(self, sim: Simulation, factor: float) -> None:
+        sim.set_gravity(*(factor * self._base(sim)))
+
+    def current(self, sim: Simulation) -> float:
+        base = self._base(sim)
+        return float(np.dot(sim.gravity, base) / np.dot(base, base))
+
+
+@dataclass
+class Trial:
+    """One trial of the search: the factor, ``stable`` or not, and the stage that decided it."""
+
+    factor: float
+    stable: bool
+    result: StageResult
+
+    def as_dict(self) -> dict:
+        return {"factor": self.factor, "stable": self.stable, **self.result.as_dict()}
+
+
+@dataclass
+class FoSResult:
+    """Result of :func:`factor_of_safety`.
+
+    ``fos`` is the middle of ``bracket = (largest stable factor, smallest failing factor)``,
+    whose width is at most the tolerance. ``failure_surface`` lists the crack elements broken
+    or gone inelastic (softened or slid) in the first failing trial, ``failure_broken`` those
+    broken; ``failure_positions`` the node positions at the end of that trial.
+    """
+
+    fos: float
+    bracket: tuple[float, float]
+    tolerance: float
+    trigger: str
+    trials: list[Trial]
+    failure_surface: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    failure_broken: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    failure_positions: np.ndarray | None = None
+    failure_mode: np.ndarray | None = None
+    wall_seconds: float = 0.0
+
+    def as_dict(self) -> dict:
+        return {"fos": self.fos, "bracket": list(self.bracket), "tolerance": self.tolerance, "trigger": self.trigger,
+                "n_trials": len(self.trials), "wall_seconds": self.wall_seconds,
+                "failure_surface_elements": int(self.failure_surface.size),
+                "failure_broken_elements": int(self.failure_broken.size),
+                "trials": [t.as_dict() for t in self.trials]}
+
+
+def fundamental_damping(sim: Simulation) -> Damping:
+    """Mass-proportional damping critical for the model's fundamental mode:
+    ``alpha = 2 omega_1 = 4 pi / T`` [1/s] (:func:`response_time`).
+
+    The quasi-static damping of strength-reduction stages. Cundall's local damping
+    (``-beta |f| sign(v)`` per node) acts on each node's whole force, and on a block sliding on
+    a frictional joint the stick-slip forces of the joint nodes are many times the net driving
+    force: a block at F = 4 times its strength crept 2 mm in 10 response times under local
+    damping 0.8 instead of sliding. Mass-proportional damping resists a sliding block only in
+    proportion to its speed, settles the fundamental mode in about one period, and gave
+    factors of safety within 0.1 % of limit equilibrium on the planar slope
+    (``docs/verification/planar_failure.json``)."""
+    return Damping(mass_proportional=4.0 * math.pi / response_time(sim.model))
+
+
+def default_trial_stage(sim: Simulation) -> Stage:
+    """The damped trial of a factor-of-safety search: :func:`fundamental_damping`, converged
+    when the unbalanced-force ratio falls below 1e-4, failed when a node moves 1 % of the model
+    height, capped at 5 response times (non-convergence counts as failure)."""
+    return Stage("trial", max_time=5.0 * response_time(sim.model), converge=Convergence(unbalanced_ratio=1e-4),
+                 fail=Failure(), damping=fundamental_damping(sim))
+
+
+def _trial_stage_at(trial: Stage, factor: float) -> Stage:
+    return dataclasses.replace(trial, name=f"{trial.name}_F{factor:.4f}", reduction=None, reduction_ramp=None,
+                               gravity_factor=None)
+
+
+def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[Trial, dict | None]:
+    """One trial on ``sim`` (already restored to the starting state): the verdict, and for a
+    failing trial what it broke (failure surface, broken elements, positions, modes)."""
+    trigger.apply(sim, factor)
+    result = run_stage(sim, _trial_stage_at(trial, factor), frames=False)
+    stable = result.reason == "converged"
+    info = None
+    cracks = sim.cracks
+    if not stable and cracks is not None:
+        info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
+                    positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
+    return Trial(factor, stable, result), info
+
+
+_WORKER: dict = {}
+
+
+def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float):
+    """A trial in a worker process: build the scene once, load the equilibrium checkpoint, then
+    restart every trial from it."""
+    from fdem.solve.checkpoint import load_checkpoint, restore, snapshot
+
+    key = (build, build_args, checkpoint)
+    if _WORKER.get("key") != key:
+        sim = build(*build_args)
+        sim.progress = False
+        load_checkpoint(sim, checkpoint)
+        _WORKER.update(key=key, sim=sim, start=snapshot(sim))
+    sim = _WORKER["sim"]
+    restore(sim, _WORKER["start"])
+    return _run_trial(sim, trigger, trial, factor)
+
+
+def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
+                     trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
+                     build=None, build_args: tuple = ()) -> FoSResult:
+    """Factor of safety by bisection on a trigger's factor (default strength reduction).
+
+    ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
+    trial restarts from it (:func:`fdem.checkpoint.snapshot`) with the trigger set to the trial
+    factor and runs ``trial`` (default :func:`default_trial_stage`). ``lower`` must be stable
+    and ``upper`` failing, else a ``ValueError`` names the trial that contradicts the bracket.
+    The search stops when the bracket is narrower than ``tol``. On return ``sim`` is back in
+    its starting state with the trigger at its starting value; with ``out_dir`` the result is
+    written to ``out_dir/fos.json`` and the first failing trial to ``out_dir/fos_failure.png``
+    (displacement since the equilibrium state, broken crack elements coloured by mode and the
+    softened or sliding ones in black: the failure surface).
+
+    Trials in parallel: with ``workers = w > 1`` each round runs ``w`` trials at once in
+    worker processes (one Numba thread each), at the ``w`` points that split the bracket into
+    ``w + 1`` equal parts, so a round narrows it ``w + 1``-fold instead of 2-fold. Each worker
+    builds the scene with ``build(*build_args)`` (a picklable, module-level function returning
+    a simulation of the same mesh and providers as ``sim``) and restarts its trials from a
+    checkpoint of ``sim`` (:func:`fdem.checkpoint.save_checkpoint`; in ``out_dir`` when given).
+    """
+    from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
+
+    for name, value in (("lower", lower), ("upper", upper), ("tol", tol)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"factor_of_safety: {name} must be positive and finite, got {value!r}")
+    if not upper > lower:
+        raise ValueError(f"factor_of_safety: upper ({upper}) must exceed lower ({lower})")
+    workers = int(workers)
+    if workers < 1:
+        raise ValueError(f"factor_of_safety: workers must be >= 1, got {workers}")
+    if workers > 1 and not callable(build):
+        raise ValueError("factor_of_safety: workers > 1 needs build, a module-level function returning a "
+                         "simulation identical to sim (the workers restart trials from a checkpoint of sim)")
+    trigger = trigger or StrengthReduction()
+    trial = trial or default_trial_stage(sim)
+    if trial.converge is None:
+        raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence)")
+    start_factor = trigger.current(sim)
+    start = snapshot(sim)
+    cracks = sim.cracks
+    trials: list[Trial] = []
+    first_fail: dict = {}
+    wall = time.perf_counter()
+    pool = None
+    tmp = None
+    saved_env = None
+
+    def record(outcome) -> bool:
+        t, info = outcome
+        trials.append(t)
+        if info is not None and (not first_fail or t.factor < first_fail["factor"]):
+            first_fail.clear()
+            first_fail.update(info)
+        return t.stable
+
+    if workers > 1:
+        import multiprocessing
+        import os
+        import tempfile
+        from concurrent.futures import ProcessPoolExecutor
+
+        if out_dir is not None:
+            Path(out_dir).mkdir(parents=True, exist_ok=True)
+            checkpoint = Path(out_dir) / "fos_start.npz"
+        else:
+            tmp = tempfile.TemporaryDirectory(prefix="fdem_fos_")
+            checkpoint = Path(tmp.name) / "fos_start.npz"
+        save_checkpoint(sim, checkpoint)
+        # workers inherit the environment: one Numba thread each, so trials do not fight for cores
+        saved_env = os.environ.get("NUMBA_NUM_THREADS")
+        os.environ["NUMBA_NUM_THREADS"] = "1"
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def run_many(factors: list[float]) -> list[bool]:
+        if pool is None:
+            out = []
+            for f in factors:
+                restore(sim, start)
+                out.append(record(_run_trial(sim, trigger, trial, f)))
+            return out
+        futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f)
+                   for f in factors]
+        return [record(fut.result()) for fut in futures]
+
+    try:
+        ends = run_many([lower, upper])
+        if not ends[0]:
+            r = trials[0].result
+            raise ValueError(f"factor_of_safety: the slope already fails at the lower factor F = {lower:g} "
+                             f"({r.reason}: {r.detail}); lower the bracket")
+        if ends[1]:
+            r = trials[1].result
+            raise ValueError(f"factor_of_safety: the slope is still stable at the upper factor F = {upper:g} "
+                             f"(converged {r.detail}); raise the bracket")
+        lo, hi = lower, upper
+        while hi - lo > tol:
+            points = [lo + (hi - lo) * (k + 1) / (workers + 1) for k in range(workers)]
+            stable = run_many(points)
+            failing = [f for f, st in zip(points, stable) if not st]
+            hi = min(failing + [hi])
+            lo = max([f for f, st in zip(points, stable) if st and f < hi] + [lo])
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+            import os
+
+            if saved_env is None:
+                os.environ.pop("NUMBA_NUM_THREADS", None)
+            else:
+                os.environ["NUMBA_NUM_THREADS"] = saved_env
+        if tmp is not None:
+            tmp.cleanup()
+        restore(sim, start)
+        trigger.reset(sim, start_factor)
+    result = FoSResult(fos=0.5 * (lo + hi), bracket=(lo, hi), tolerance=tol, trigger=trigger.name, trials=trials,
+                       failure_surface=first_fail.get("surface", np.zeros(0, np.int64)),
+                       failure_broken=first_fail.get("broken", np.zeros(0, np.int64)),
+                       failure_positions=first_fail.get("positions"), failure_mode=first_fail.get("mode"),
+                       wall_seconds=time.perf_counter() - wall)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "fos.json").write_text(json.dumps(result.as_dict(), indent=2))
+        if result.failure_positions is not None and cracks is not None:
+            _failure_picture(out / "fos_failure.png", sim, cracks, result)
+    return result
+
+
+def _failure_picture(path: Path, sim: Simulation, cracks, result: FoSResult) -> Path:
+    """The first failing trial: displacement from the equilibrium state and the failure surface."""
+    from fdem.io.pictures import failure_frame
+
+    x = result.failure_positions
+    topo = sim.model.topology
+    cn = topo.crack_nodes
+    segs = np.stack([0.5 * (x[cn[:, 0]] + x[cn[:, 3]]), 0.5 * (x[cn[:, 1]] + x[cn[:, 2]])], axis=1)
+    show = np.zeros(topo.n_cracks, bool)
+    show[result.failure_surface] = True
+    mode = np.zeros(topo.n_cracks, np.int8)
+    if result.failure_mode is not None:
+        mode[result.failure_broken] = result.failure_mode[result.failure_broken]
+    disp = np.linalg.norm(x - sim.state.x, axis=1)
+    failing = min((t.factor for t in result.trials if not t.stable), default=float("nan"))
+    return failure_frame(path, x, topo.triangles, disp, segs, show, mode,
+                         title=f"first failing trial F = {failing:.3f} (FoS {result.fos:.3f}, "
+                               f"bracket {result.bracket[0]:.3f}-{result.bracket[1]:.3f}); black: softened or sliding")

@@ -1,0 +1,206 @@
+"""The slope workflow: equilibrium, factor of safety, strength reduction to failure, runout to rest.
+
+Composed of :mod:`fdem.stages` so that a case script only builds the model and calls
+:func:`run_slope_workflow`:
+
+1. **Equilibrium check** at ``F = 1`` (the model must come from a geostatic start,
+   :func:`fdem.geostatic.geostatic_start`): a damped stage that must converge; a slope that
+   does not stand at ``F = 1`` is reported, not hidden. Damped stages use
+   :func:`fdem.stages.fundamental_damping` (mass-proportional, critical for the fundamental mode).
+2. **Factor of safety** (optional): :func:`fdem.stages.factor_of_safety` from that state.
+3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
+   damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
+   the strength falls by 10 % of its initial value per 10,000 steps of 2 us, i.e. ``1/F``
+   falls by 5 per second, undamped).
+4. **Runout** at the factor where the slope failed: dynamic (no quasi-static damping), until
+   the kinetic energy falls below a fraction of its peak and stays there for one response
+   time, capped in simulated time. With ``out_dir`` the state it starts from is saved to
+   ``runout_start.npz`` (:func:`fdem.checkpoint.load_checkpoint` restarts from it).
+
+Every stage's result (why it ended, when, how many steps) goes into the returned summary.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+import numpy as np
+from fdem.solve.damping import NO_DAMPING
+from fdem.solve.simulation import Simulation
+from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
+from fdem.workflow.fos import factor_of_safety, fundamental_damping
+
+__all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "runout_stage",
+           "factor_of_safety_figures"]
+
+
+def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[float, ...]:
+    """Reduction factors ``F`` whose strengths ``1/F`` fall by ``step`` of the initial value,
+    from ``1 - step`` down to ``final_strength`` (the four-slope schedule: 0.9, ..., 0.3)."""
+    if not (0 < final_strength < 1 and 0 < step < 1):
+        raise ValueError(f"final_strength and step must lie in (0, 1), got {final_strength}, {step}")
+    n = int(math.floor((1.0 - final_strength) / step + 1e-9))
+    return tuple(1.0 / round(1.0 - k * step, 10) for k in range(1, n + 1))
+
+
+@dataclass
+class SlopeWorkflow:
+    """Settings of :func:`run_slope_workflow` (times in simulated seconds; ``None``: from the
+    model's response time ``T``, :func:`fdem.stages.response_time`).
+
+    reduction : ``"steps"`` (damped equilibrium at each factor; default) or ``"rate"``
+    factors : the factors ``F`` of the steps (default :func:`reduction_steps`: 1/0.9 ... 1/0.3)
+    reduction_rate : fall of the strength ``1/F`` per second in ``"rate"`` mode (paper: 5 /s)
+    final_strength : the strength ``1/F`` the rate mode stops at (paper: 0.3)
+    fos : ``(lower, upper, tol)`` to search the factor of safety first, or ``None``
+    equilibrium_ratio : unbalanced-force ratio that counts as equilibrium (default 1e-4)
+    step_time : cap of each damped stage (default ``5 T``, as the factor-of-safety trials: with
+        the fundamental-mode damping a stable slope converges within about 1.5 T)
+    fail_displacement : displacement since a stage began that counts as failure [m]
+        (default 1 % of the model height)
+    runout_time : cap of the runout stage (default ``max(20 T, 4 sqrt(2 H / g))``, four times
+        the free-fall time over the model height ``H``)
+    rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
+        its peak for one response time (default 0.01)
+    runout_safety : time-step factor of the runout stage (default 0.4; the other stages use the
+        simulation's, 0.8 by default). Impacts need the smaller step: on the demo slope the runout
+        distance at 0.8 was 15.5 +- 0.3 m against 14.3 +- 0.7 m at 0.4 and 13.7 m at 0.2
+        (docs/pareto.md), and a two-body impact loses 1.5 % of its energy at 0.8, 0.25 % at 0.4.
+    """
+
+    reduction: str = "steps"
+    factors: tuple[float, ...] = field(default_factory=reduction_steps)
+    reduction_rate: float = 5.0
+    final_strength: float = 0.3
+    fos: tuple[float, float, float] | None = None
+    equilibrium_ratio: float = 1e-4
+    step_time: float | None = None
+    fail_displacement: float | None = None
+    runout_time: float | None = None
+    rest_kinetic_ratio: float = 0.01
+    runout_safety: float | None = 0.4
+
+    def __post_init__(self):
+        if self.reduction not in ("steps", "rate"):
+            raise ValueError(f"reduction must be 'steps' or 'rate', got {self.reduction!r}")
+        if any(not (math.isfinite(f) and f > 0) for f in self.factors):
+            raise ValueError(f"reduction factors must be positive and finite, got {self.factors}")
+        for name in ("reduction_rate", "final_strength", "equilibrium_ratio", "rest_kinetic_ratio"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"SlopeWorkflow.{name} must be positive and finite, got {v!r}")
+        if self.runout_safety is not None and not 0.0 < self.runout_safety <= 1.0:
+            raise ValueError(f"SlopeWorkflow.runout_safety (time-step factor) must lie in (0, 1], got {self.runout_safety}")
+
+
+def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
+    """Run the slope workflow (module docstring) on ``sim``; returns a summary dict with every
+    stage's result, the factor of safety when searched, the factor at failure and the state
+    the run ended in (``stable`` or ``failed``)."""
+    wf = workflow or SlopeWorkflow()
+    cracks = sim.cracks
+    if cracks is None:
+        raise ValueError("run_slope_workflow needs crack elements (a CrackSet provider)")
+    T = response_time(sim.model)
+    height = float(np.ptp(sim.model.topology.x0[:, 1]))
+    g = float(np.linalg.norm(sim.gravity)) or 9.81
+    step_time = wf.step_time or 5.0 * T
+    fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
+    damped = fundamental_damping(sim)
+    summary: dict = {"response_time_s": T, "stages": [], "fos": None, "failed_at_factor": None}
+
+    def record(result):
+        summary["stages"].append(result.as_dict())
+        return result
+
+    try:
+        _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir)
+    except KeyboardInterrupt:
+        # Ctrl-C: the stages so far and the state reached are kept, so the caller can still
+        # write its report and pictures (the solver has written ``interrupted_state.npz``)
+        summary["outcome"] = "interrupted"
+        summary["interrupted_at_s"] = float(sim.state.time)
+    summary["final_reduction"] = cracks.interfaces.reduction
+    summary["n_broken"] = int(cracks.broken.sum())
+    return summary
+
+
+def _time_cap_reached(sim) -> bool:
+    """True when a cap on the whole run's simulated time (``sim.time_cap``, set by a case's
+    ``--max-time``) has been reached: a stage that ended there says nothing about stability."""
+    cap = getattr(sim, "time_cap", None)
+    return cap is not None and sim.state.time >= cap - 0.5 * sim.dt
+
+
+def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir) -> None:
+    cracks.hold_elastic(False)
+    eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
+                                     converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
+    summary["equilibrium"] = eq.reason
+    if eq.reason != "converged" and _time_cap_reached(sim):
+        summary["outcome"] = "time_capped"
+        return
+    if eq.reason != "converged":
+        summary["outcome"] = "failed"
+        summary["failed_at_factor"] = 1.0
+    else:
+        if wf.fos is not None:
+            lower, upper, tol = wf.fos
+            fos = factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir)
+            summary["fos"] = fos.as_dict()
+            summary["_fos_result"] = fos
+        if wf.reduction == "steps":
+            for F in wf.factors:
+                r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
+                                                damping=damped, fail=fail,
+                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio))))
+                if r.reason != "converged":
+                    if _time_cap_reached(sim):
+                        summary["outcome"] = "time_capped"
+                        return
+                    summary["failed_at_factor"] = F
+                    break
+        else:
+            F_end = 1.0 / wf.final_strength
+            seconds = (1.0 - wf.final_strength) / wf.reduction_rate
+            r = record(run_stage(sim, Stage("reduction_rate", duration=seconds, reduction_ramp=(F_end, seconds),
+                                            damping=NO_DAMPING)))
+            summary["failed_at_factor"] = F_end
+        summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
+    if summary["outcome"] == "failed":
+        if out_dir is not None:
+            # the failed state before the runout: rerun the runout from it with other settings
+            # (a longer cap, a smaller step), or profile it (cases/benchmarks/profile_scene.py)
+            from pathlib import Path
+
+            from fdem.solve.checkpoint import save_checkpoint
+
+            summary["runout_checkpoint"] = str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
+        record(run_stage(sim, runout_stage(wf, T, height, g)))
+
+
+def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
+    """The dynamic runout stage of the workflow: no damping, time-step factor
+    ``wf.runout_safety``; ends when the kinetic energy has stayed below
+    ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
+    ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
+    the model height ``H`` [m] under gravity ``g`` [m/s^2])."""
+    cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
+    return Stage("runout", max_time=cap, damping=NO_DAMPING, safety=wf.runout_safety,
+                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T))
+
+
+def factor_of_safety_figures(result: dict) -> dict:
+    """``fos``, ``fos_bracket`` and ``fos_method`` from a workflow summary: the bisection's when
+    it searched, else the bracket of the reduction steps, ``[largest factor at which the slope
+    converged, factor at which it failed]``, with ``fos`` its middle (``None`` if it never failed)."""
+    if result.get("fos"):
+        return {"fos": result["fos"]["fos"], "fos_bracket": result["fos"]["bracket"], "fos_method": "bisection"}
+    stable = [st["reduction"] for st in result["stages"]
+              if st["name"].startswith("reduction") or st["name"] == "equilibrium"
+              if st["reason"] == "converged"]
+    failing = result.get("failed_at_factor")
+    if failing is None or not stable:
+        return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],
+                "fos_method": "reduction steps"}
+    lo = max(stable)
+    return {"fos": 0.5 * (lo + failing), "fos_bracket": [lo, failing], "fos_method": "reduction steps"}

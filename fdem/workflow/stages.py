@@ -1,0 +1,331 @@
+"""Stages with physical end rules, strength-reduction schedules and the factor-of-safety search.
+
+A stage is a stretch of simulated time with its own damping, strength-reduction factor and
+end rule. It ends by physics, never by a bare step count (the step count that means "settled"
+changes with the mesh and the penalties):
+
+* ``duration``: a fixed length of simulated time [s] (a dynamic runout window, a ramp);
+* ``converge``: equilibrium reached — the unbalanced-force ratio
+  (:func:`fdem.geostatic.unbalanced_force_ratio`), the kinetic energy relative to the stage's
+  peak, and/or the largest monitored speed fall below their limits;
+* ``fail``: an objective failure criterion fires — a monitored node moves more than a set
+  displacement since the stage began, or keeps a speed above a limit;
+* ``max_time``: the cap [s] on a stage with rules; a capped stage reports so.
+
+Every stage reports why it ended (:class:`StageResult`): ``converged``, ``failed``,
+``capped`` or ``completed`` (a fixed-duration stage that ran its time).
+
+Time scales come from the model (:func:`response_time`): the fundamental period of a
+slope of height ``H`` (shear beam on a rigid base) is ``T = 4 H / c_s`` with
+``c_s = sqrt(mu / rho)`` (Kramer 1996, *Geotechnical Earthquake Engineering*, sec. 7.2); a
+15-30 m slope rings for about 0.3 s. Checks run every ``T / 40``; a stage with rules is
+capped at ``10 T`` by default, a factor-of-safety trial at ``5 T`` (:func:`default_trial_stage`).
+
+Factor of safety (:func:`factor_of_safety`): from a state in equilibrium, each trial sets a
+factor ``F`` of a trigger (strength reduction: ``c / F``, ``tan(phi) / F`` everywhere, see
+:mod:`fdem.interfaces`), restarts from the saved state and runs a damped stage. The slope is
+*stable* at ``F`` if that stage converges, *failing* if the failure rule fires or the stage
+does not converge within its cap (non-convergence, as in the strength-reduction practice of
+Dawson, Roth & Drescher 1999). Bisection narrows ``[stable, failing]`` to the tolerance.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+import numpy as np
+from fdem.solve.damping import NO_DAMPING, Damping
+from fdem.solve.simulation import Simulation
+
+__all__ = ["Convergence", "Failure", "Stage", "StageResult", "response_time", "run_stage"]
+
+
+# ----------------------------------------------------------------------------- rules
+def _positive_or_none(value, name: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive finite number or None, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Equilibrium rule: the stage has converged when every given limit holds at a check.
+
+    unbalanced_ratio : limit on :func:`fdem.geostatic.unbalanced_force_ratio`
+        ``sum |f_net| / sum |m g|`` over free components [-] (default 1e-4)
+    kinetic_ratio : limit on the kinetic energy over the stage's peak kinetic energy [-]
+    speed : limit on the largest monitored speed [m/s]
+    min_time : simulated time [s] before the rule may fire (default 0)
+    hold_for : simulated time [s] the limits must keep holding, check after check, before the
+        stage ends (default 0: the first check that meets them); a runout that comes to rest
+        and stays at rest
+    """
+
+    unbalanced_ratio: float | None = 1e-4
+    kinetic_ratio: float | None = None
+    speed: float | None = None
+    min_time: float = 0.0
+    hold_for: float = 0.0
+
+    def __post_init__(self):
+        _positive_or_none(self.unbalanced_ratio, "Convergence.unbalanced_ratio")
+        _positive_or_none(self.kinetic_ratio, "Convergence.kinetic_ratio")
+        _positive_or_none(self.speed, "Convergence.speed")
+        if not (math.isfinite(self.min_time) and self.min_time >= 0):
+            raise ValueError(f"Convergence.min_time must be >= 0, got {self.min_time!r}")
+        if not (math.isfinite(self.hold_for) and self.hold_for >= 0):
+            raise ValueError(f"Convergence.hold_for must be >= 0, got {self.hold_for!r}")
+        if self.unbalanced_ratio is None and self.kinetic_ratio is None and self.speed is None:
+            raise ValueError("Convergence needs at least one of unbalanced_ratio, kinetic_ratio, speed")
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Failure rule: fires when a monitored node has moved more than ``displacement`` [m]
+    since the stage began, or when the largest monitored speed exceeds ``speed`` [m/s].
+    ``displacement=None`` and ``speed=None`` together mean "1 % of the model height"."""
+
+    displacement: float | None = None
+    speed: float | None = None
+
+    def __post_init__(self):
+        _positive_or_none(self.displacement, "Failure.displacement")
+        _positive_or_none(self.speed, "Failure.speed")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of a run (see the module docstring).
+
+    Attributes
+    ----------
+    name : label of the stage in the history and the outputs
+    duration : fixed simulated time [s]; the stage then ends ``completed`` (rules may end it earlier)
+    max_time : cap [s] of a stage with rules (default ``10 T``, :func:`response_time`)
+    converge, fail : the end rules (:class:`Convergence`, :class:`Failure`)
+    damping : :class:`fdem.solver.Damping` of the stage (default none: dynamic)
+    reduction : strength-reduction factor ``F`` set when the stage starts (``None``: keep)
+    reduction_ramp : ``(F_end, seconds)``: the strength ``1/F`` moves linearly from its value
+        at the stage start to ``1/F_end`` over ``seconds`` of simulated time, updated at every
+        check (the four-slope paper's schedule, 10 % of the initial strength per 10,000 steps
+        of 2 us, is ``1/F`` falling by 5 per second)
+    gravity_factor : gravity set to this multiple of ``base_gravity`` when the stage starts
+        (``None``: keep); :meth:`fdem.solver.Simulation.set_gravity` books the change
+    base_gravity : (gx, gy) [m/s^2] the factor multiplies (default: the model's gravity)
+    hold_elastic : hold the crack elements elastic during the stage (``None``: keep)
+    check_interval : simulated time [s] between checks of the rules (default ``T / 40``)
+    output_interval : simulated time [s] between output frames (default: 4 per stage)
+    monitor : nodes the rules watch (a group name, predicate or ids; default all nodes)
+    safety : time-step factor of the stage, the fraction of the critical step (``None``: the
+        simulation's ``safety``; ignored when the simulation has a user time step). The
+        simulation's own factor is restored when the stage ends.
+    """
+
+    name: str
+    duration: float | None = None
+    max_time: float | None = None
+    converge: Convergence | None = None
+    fail: Failure | None = None
+    damping: Damping = NO_DAMPING
+    reduction: float | None = None
+    reduction_ramp: tuple[float, float] | None = None
+    gravity_factor: float | None = None
+    base_gravity: tuple[float, float] | None = None
+    hold_elastic: bool | None = None
+    check_interval: float | None = None
+    output_interval: float | None = None
+    monitor: object = None
+    safety: float | None = None
+
+    def __post_init__(self):
+        if not self.name:
+            raise ValueError("a stage needs a name")
+        if self.safety is not None and not 0.0 < self.safety <= 1.0:
+            raise ValueError(f"stage {self.name!r}: safety (time-step factor) must lie in (0, 1], got {self.safety}")
+        _positive_or_none(self.duration, f"stage {self.name!r}: duration")
+        _positive_or_none(self.max_time, f"stage {self.name!r}: max_time")
+        _positive_or_none(self.reduction, f"stage {self.name!r}: reduction")
+        if self.gravity_factor is not None and not (math.isfinite(self.gravity_factor) and self.gravity_factor >= 0):
+            raise ValueError(f"stage {self.name!r}: gravity_factor must be finite and >= 0, got {self.gravity_factor!r}")
+        _positive_or_none(self.check_interval, f"stage {self.name!r}: check_interval")
+        _positive_or_none(self.output_interval, f"stage {self.name!r}: output_interval")
+        if self.duration is None and self.converge is None and self.fail is None:
+            raise ValueError(f"stage {self.name!r} can never end: give a duration, or a converge/fail rule "
+                             "(with max_time as its cap)")
+        if self.reduction_ramp is not None:
+            f_end, seconds = self.reduction_ramp
+            _positive_or_none(f_end, f"stage {self.name!r}: reduction_ramp end factor")
+            _positive_or_none(seconds, f"stage {self.name!r}: reduction_ramp time")
+        if not isinstance(self.damping, Damping):
+            raise ValueError(f"stage {self.name!r}: damping must be a fdem.solver.Damping, got {self.damping!r}")
+
+
+@dataclass
+class StageResult:
+    """How a stage went. ``reason``: ``converged``, ``failed``, ``capped`` or ``completed``."""
+
+    name: str
+    reason: str
+    t_start: float
+    t_end: float
+    steps: int
+    wall_seconds: float
+    dt: float
+    reduction: float
+    unbalanced_ratio: float
+    kinetic_energy: float
+    peak_kinetic_energy: float
+    max_speed: float
+    max_displacement: float
+    n_broken: int
+    detail: str = ""
+
+    @property
+    def converged(self) -> bool:
+        return self.reason == "converged"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+# ----------------------------------------------------------------------------- helpers
+def response_time(model) -> float:
+    """Fundamental period ``T = 4 H / c_s`` [s] of the model as a shear beam on a rigid base:
+    ``H`` the vertical extent of the reference mesh [m], ``c_s = sqrt(mu / rho)`` the slowest
+    shear-wave speed of its materials (Kramer 1996, sec. 7.2)."""
+    y = model.topology.x0[:, 1]
+    height = float(y.max() - y.min())
+    _, mu = model.lame_arrays()
+    rho = model.property_array("density")
+    cs = float(np.sqrt(mu / rho).min())
+    if not (height > 0 and cs > 0):
+        raise ValueError(f"cannot define a response time: model height {height} m, shear-wave speed {cs} m/s")
+    return 4.0 * height / cs
+
+
+def _monitor_nodes(sim: Simulation, monitor) -> np.ndarray | None:
+    if monitor is None:
+        return None
+    return sim.model.select_nodes(monitor, "stage monitor")
+
+
+def _max_norm(a: np.ndarray, nodes: np.ndarray | None) -> float:
+    if nodes is not None:
+        a = a[nodes]
+    return float(np.sqrt((a * a).sum(axis=1)).max()) if len(a) else 0.0
+
+
+def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult:
+    """Run ``stage`` on ``sim`` until its end rule (see the module docstring); returns its result.
+
+    ``frames=False`` writes no output frames (the history rows are still written), as for the
+    trials of a factor-of-safety search.
+
+    The stage's factor, hold and damping are set first. Rules are checked every
+    ``check_interval`` of simulated time (a history row of the ledger is written at each
+    check); the run stops at the first rule that holds. A run that goes unstable raises
+    :class:`fdem.solver.InstabilityError` with its last good state on disk, as every run does.
+    """
+    from fdem.solve.geostatic import unbalanced_force_ratio
+
+    T = response_time(sim.model)
+    cracks = sim.cracks
+    if stage.reduction is not None or stage.reduction_ramp is not None or stage.hold_elastic is not None:
+        if cracks is None:
+            raise ValueError(f"stage {stage.name!r} changes strength, but the simulation has no crack elements")
+    if stage.hold_elastic is not None:
+        cracks.hold_elastic(stage.hold_elastic)
+    if stage.reduction is not None:
+        cracks.interfaces.set_reduction(stage.reduction)
+    if stage.gravity_factor is not None:
+        base = np.asarray(stage.base_gravity if stage.base_gravity is not None else sim.model.gravity, float)
+        sim.set_gravity(*(stage.gravity_factor * base))
+    nodes = _monitor_nodes(sim, stage.monitor)
+    height = float(np.ptp(sim.model.topology.x0[:, 1]))
+    fail = stage.fail
+    fail_disp = None
+    if fail is not None:
+        fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
+    length = stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T)
+    sim_safety = sim.safety
+    try:
+        if stage.safety is not None:
+            sim.safety = stage.safety
+        sim.dt = sim._choose_dt()
+    except ValueError:
+        sim.safety = sim_safety
+        raise
+    dt = sim.dt
+    check_steps = max(1, int(round((stage.check_interval or T / 40.0) / dt)))
+    output_steps = max(1, int(round((stage.output_interval or length / 4.0) / dt)))
+    if not frames:
+        output_steps = 2 ** 62
+    t0 = sim.state.time
+    step0 = sim.state.step
+    x_start = sim.state.x.copy()
+    ramp = None
+    if stage.reduction_ramp is not None:
+        ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stage.reduction_ramp[1])
+    status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
+              "since": None}
+    conv = stage.converge
+
+    def rule(s: Simulation) -> bool:
+        t = s.state.time - t0
+        if ramp is not None:
+            s0, s1, seconds = ramp
+            strength = s0 + (s1 - s0) * min(t / seconds, 1.0)
+            cracks.interfaces.set_reduction(1.0 / strength)
+        row = s.last_row
+        kin = float(row["kinetic"]) if row else 0.0
+        status["peak"] = max(status["peak"], kin)
+        speed = _max_norm(s.state.v, nodes)
+        disp = _max_norm(s.state.x - x_start, nodes)
+        status["speed"], status["disp"] = speed, disp
+        if fail is not None:
+            if fail_disp is not None and disp > fail_disp:
+                status["reason"] = "failed"
+                status["detail"] = f"displacement {disp:.4g} m > {fail_disp:.4g} m after {t:.4g} s"
+                return True
+            if fail.speed is not None and speed > fail.speed:
+                status["reason"] = "failed"
+                status["detail"] = f"speed {speed:.4g} m/s > {fail.speed:.4g} m/s after {t:.4g} s"
+                return True
+        if conv is not None and t >= conv.min_time:
+            ok = True
+            if conv.speed is not None:
+                ok = speed <= conv.speed
+            if ok and conv.kinetic_ratio is not None:
+                ok = status["peak"] > 0 and kin <= conv.kinetic_ratio * status["peak"]
+            if ok and conv.unbalanced_ratio is not None:
+                status["ratio"] = unbalanced_force_ratio(s)
+                ok = status["ratio"] <= conv.unbalanced_ratio
+            if not ok:
+                status["since"] = None
+            else:
+                if status["since"] is None:
+                    status["since"] = t
+                if t - status["since"] >= conv.hold_for:
+                    status["reason"] = "converged"
+                    status["detail"] = f"after {t:.4g} s"
+                    return True
+        return False
+
+    wall = time.perf_counter()
+    try:
+        sim.run(t_end=t0 + length, damping=stage.damping, stage=stage.name, history_every=check_steps,
+                output_every=output_steps, stop_when=rule, final_output=frames)
+    finally:
+        sim.safety = sim_safety   # the next stage chooses its step afresh
+    wall = time.perf_counter() - wall
+    reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
+    if reason == "capped":
+        status["detail"] = f"no rule held within {length:.4g} s ({length / T:.3g} response times)"
+    ratio = status["ratio"] if math.isfinite(status["ratio"]) else unbalanced_force_ratio(sim)
+    row = sim.last_row or {}
+    return StageResult(
+        name=stage.name, reason=reason, t_start=t0, t_end=sim.state.time, steps=sim.state.step - step0,
+        wall_seconds=wall, dt=dt, reduction=cracks.interfaces.reduction if cracks is not None else 1.0,
+        unbalanced_ratio=float(ratio), kinetic_energy=float(row.get("kinetic", 0.0)),
+        peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
+        max_displacement=_max_norm(sim.state.x - x_start, nodes),
+        n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"])
