@@ -30,9 +30,9 @@ def test_frictionless_impact_conserves_momentum_and_energy(alpha):
     cracks = CrackSet(topo, {0: glue})
     contact = ContactSet(topo, alpha * E, friction_angle=0.0, mass=model.node_mass(), cracks=cracks)
     # Bodies start 0 apart at x = 1 (touching, not overlapping): they collide at once.
-    # Half the default safety factor: the energy error of a violent penalty impact converges
+    # Half the default dt_fraction factor: the energy error of a violent penalty impact converges
     # at about second order in dt (alpha = 10: 1.3 % at 0.8, 0.21 % at 0.4, 0.036 % at 0.2).
-    sim = Simulation(model, providers=[cracks, contact], progress=False, safety=0.4)
+    sim = Simulation(model, providers=[cracks, contact], progress=False, dt_fraction=0.4)
     m = sim.state.mass
     p0 = (m[:, None] * sim.state.v).sum(axis=0)
     t_contact = 3 * 1.0 / np.sqrt(E / RHO)  # a few wave transits: the bodies separate again

@@ -38,34 +38,34 @@ def test_stage_rules_are_checked_before_anything_runs():
         Stage("x", duration=1.0, damping=0.8)
     assert reduction_steps(0.3) == pytest.approx([1 / 0.9, 1 / 0.8, 1 / 0.7, 1 / 0.6, 1 / 0.5, 1 / 0.4, 1 / 0.3])
     with pytest.raises(ValueError, match="time-step factor"):
-        Stage("x", duration=1.0, safety=1.5)
+        Stage("x", duration=1.0, dt_fraction=1.5)
 
 
 def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     s = scene()
     crit, _ = s.sim.critical_dt()
     T = response_time(s.sim.model)
-    r = run_stage(s.sim, Stage("fine", duration=0.05 * T, safety=0.4, damping=fundamental_damping(s.sim)),
+    r = run_stage(s.sim, Stage("fine", duration=0.05 * T, dt_fraction=0.4, damping=fundamental_damping(s.sim)),
                   frames=False)
-    assert r.dt == pytest.approx(0.4 * crit) and s.sim.safety == 0.8
+    assert r.dt == pytest.approx(0.4 * crit) and s.sim.dt_fraction == 0.8
     assert r.steps == pytest.approx(0.05 * T / (0.4 * crit), abs=1)
     r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim)), frames=False)
     assert r.dt == pytest.approx(0.8 * crit)
-    assert SlopeWorkflow().runout_safety == 0.4
+    assert SlopeWorkflow().runout_dt_fraction == 0.4
     # a user step above the critical one is refused, and the simulation keeps its own factor
     s.sim.user_dt = 2.0 * crit
     with pytest.raises(ValueError, match="exceeds the stable time step"):
-        run_stage(s.sim, Stage("too_big", duration=0.05 * T, safety=0.4), frames=False)
-    assert s.sim.safety == 0.8
+        run_stage(s.sim, Stage("too_big", duration=0.05 * T, dt_fraction=0.4), frames=False)
+    assert s.sim.dt_fraction == 0.8
     s.sim.user_dt = None
 
 
 def test_a_trial_stage_keeps_its_time_step_factor():
     from fdem.workflow.fos import _trial_stage_at
 
-    trial = Stage("trial", max_time=1.0, converge=Convergence(), safety=0.4, output_interval=0.1, reduction=2.0)
+    trial = Stage("trial", max_time=1.0, converge=Convergence(), dt_fraction=0.4, output_interval=0.1, reduction=2.0)
     at = _trial_stage_at(trial, 1.5)
-    assert at.name == "trial_F1.5000" and at.safety == 0.4 and at.output_interval == 0.1
+    assert at.name == "trial_F1.5000" and at.dt_fraction == 0.4 and at.output_interval == 0.1
     assert at.reduction is None   # the trigger sets the factor, not the stage
 
 

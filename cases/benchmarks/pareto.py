@@ -108,7 +108,7 @@ def wave(h: float, alpha: float | None, safety: float, length: float = 10.0, sta
     model.prescribe_velocity("left", vx=v0)
     model.roller("bottom", "y")
     model.roller("top", "y")
-    sim = Simulation(model, providers=providers, progress=False, safety=safety)
+    sim = Simulation(model, providers=providers, progress=False, dt_fraction=safety)
     x0 = model.topology.x0
     nodes = np.flatnonzero(np.abs(x0[:, 0] - station) < 1e-9)
     c = mat.p_wave_speed
@@ -150,7 +150,7 @@ def column(ny: int, alpha: float | None, safety: float, periods: float = 4.0) ->
     model.fix("bottom")
     model.roller("left", "x")
     model.roller("right", "x")
-    sim = Simulation(model, providers=providers, progress=False, safety=safety)
+    sim = Simulation(model, providers=providers, progress=False, dt_fraction=safety)
     c = mat.p_wave_speed
     T = 4 * COL_H / c
     sim.run(t_end=periods * T, damping=Damping(mass_proportional=2 * (2 * math.pi / T)), history_every=10**6,
@@ -195,7 +195,7 @@ def mode1(h: float, alpha: float, safety: float, rate_periods: float = 20.0) -> 
     x0 = topo.x0
     model.prescribe_velocity(lambda x, y: x < 1e-9, vx=-v, vy=0.0)
     model.prescribe_velocity(lambda x, y: x > width - 1e-9, vx=v, vy=0.0)
-    sim = Simulation(model, providers=[cracks], progress=False, safety=safety)
+    sim = Simulation(model, providers=[cracks], progress=False, dt_fraction=safety)
     joint_ids = np.flatnonzero(cracks.tag == 1)
     t_end = 2.0 * o_r / (2 * v)
     while sim.state.time < t_end and not cracks.broken[joint_ids].all():
@@ -230,7 +230,7 @@ def brazilian(divisions: int, alpha: float = 10.0, safety: float = 0.8, angle_de
     y_arc = R * math.cos(math.radians(6.0)) - 1e-9 * R
     top = model.prescribe_velocity(lambda x, y: y > y_arc, vx=0.0, vy=-v_platen)
     model.prescribe_velocity(lambda x, y: y < -y_arc, vx=0.0, vy=v_platen)
-    sim = Simulation(model, providers=[cracks], progress=False, safety=safety)
+    sim = Simulation(model, providers=[cracks], progress=False, dt_fraction=safety)
     peak, damaged_at_peak, inelastic_at_peak = 0.0, 0, 0
     while True:
         sim.run(n_steps=check_every, energy_tolerance=None, output_every=10**9, history_every=10**6)
@@ -262,7 +262,7 @@ def incline(size: float, alpha: float, safety: float, theta: float = 30.0, phi: 
     t0 = time.perf_counter()
     model, cracks, _, block = m.build(theta, phi, size=size)
     contact = ContactSet(model.topology, alpha * m.YOUNG, friction_angle=phi, mass=model.node_mass(), cracks=cracks)
-    sim = Simulation(model, providers=[cracks, contact], progress=False, safety=safety)
+    sim = Simulation(model, providers=[cracks, contact], progress=False, dt_fraction=safety)
     x0 = sim.state.x[block].copy()
     sim.run(t_end=1.0, output_every=10**9, history_every=2000)
     slide = float((sim.state.x[block, 0] - x0[:, 0]).mean())
@@ -287,7 +287,7 @@ def impact(size: float, alpha: float, safety: float) -> dict:
     model.set_initial_velocity(vx=-1.0, where=np.flatnonzero(body == 1))
     cracks = CrackSet(topo, {0: glue(E, 10.0)})
     contact = ContactSet(topo, alpha * E, friction_angle=0.0, mass=model.node_mass(), cracks=cracks)
-    sim = Simulation(model, providers=[cracks, contact], progress=False, safety=safety)
+    sim = Simulation(model, providers=[cracks, contact], progress=False, dt_fraction=safety)
     sim.run(t_end=3.0 / math.sqrt(E / RHO), history_every=20, energy_tolerance=None, output_every=10**9)
     e = np.array([r["kinetic"] + r["strain"] + r["crack_elastic"] + r["contact_elastic"] for r in sim.history])
     err = float(np.abs(e - e[0]).max() / e[0])
@@ -320,7 +320,7 @@ def planar(size: float, alpha: float, safety: float, tangential_ratio: float = 1
     finally:
         p.property_sets = original
     sim = scene.sim
-    sim.safety = safety
+    sim.dt_fraction = safety
     sim.dt = sim._choose_dt()
     result = factor_of_safety(sim, 1.0, 1.8, tol=tol, trial=p.trial_stage(sim))
     steps = sum(t.result.steps for t in result.trials) if hasattr(result.trials[0].result, "steps") else None
@@ -475,7 +475,7 @@ def runout(safety: float, seed: int | None = None, kick: float = 1e-6) -> dict:
         sim.state.v += kick * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
     topo = sim.model.topology
     t_start, broken0 = sim.state.time, int(cracks.broken.sum())
-    res = run_stage(sim, runout_stage(SlopeWorkflow(runout_safety=safety), response_time(sim.model),
+    res = run_stage(sim, runout_stage(SlopeWorkflow(runout_dt_fraction=safety), response_time(sim.model),
                                       float(np.ptp(topo.x0[:, 1])),
                                       float(np.linalg.norm(sim.gravity))), frames=False)
     toe_x, _ = slope_toe(geo.bodies[0])

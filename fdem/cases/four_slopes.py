@@ -193,15 +193,15 @@ def main(argv=None) -> dict:
     parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
                         help="search the factor of safety in [LOWER, UPPER] to TOL first")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
-    parser.add_argument("--runout-safety", type=float, default=0.4, metavar="FACTOR",
+    parser.add_argument("--runout-dt-fraction", type=float, default=0.4, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.4; 0.8 is twice as fast and "
                              "lengthens the demo's runout by about 8 %%, docs/pareto.md)")
     parser.add_argument("--max-steps", type=int, default=None, help="0: mesh and pictures only")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
     check_common(parser, args)
-    if not 0.0 < args.runout_safety <= 1.0:
-        parser.error(f"--runout-safety must lie in (0, 1], got {args.runout_safety}")
+    if not 0.0 < args.runout_dt_fraction <= 1.0:
+        parser.error(f"--runout-dt-fraction must lie in (0, 1], got {args.runout_dt_fraction}")
     set_threads(args.threads)
     try:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
@@ -255,7 +255,7 @@ def main(argv=None) -> dict:
               + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
         t1 = time.perf_counter()
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
-                                 runout_time=args.runout_time, runout_safety=args.runout_safety)
+                                 runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction)
         try:
             result = run_slope_workflow(sim, workflow, out_dir=out)
             save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state

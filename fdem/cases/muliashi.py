@@ -205,9 +205,9 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     else:
         k_fail, fos_summary = args.gravity_factor, None
     # The collapse under many times gravity is violent: half the automatic step keeps contact
-    # impacts accurate (docs/pareto.md: impact energy 1.5 % at safety 0.8, 0.25 % at 0.4); at
+    # impacts accurate (docs/pareto.md: impact energy 1.5 % at dt_fraction 0.8, 0.25 % at 0.4); at
     # 0.8 the first run inverted a crest triangle at t = 1.09 s.
-    sim.safety = 0.4
+    sim.dt_fraction = 0.4
     failure = run_stage(sim, Stage("gravity_increase", gravity_factor=k_fail, max_time=args.runout_time or 20 * T,
                                    converge=Convergence(unbalanced_ratio=None, kinetic_ratio=0.01, min_time=2 * T,
                                                         hold_for=T)))

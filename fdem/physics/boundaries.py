@@ -47,7 +47,7 @@ Stability: a node of mass ``m`` with a spring of frequency ``omega`` and a lagge
 (Jury's test on ``z^2 - (2 - omega^2 dt^2 - c dt/m) z + 1 - c dt/m``); the dashpot alone needs
 ``dt < 2 m / c``. The solver combines the providers' steps as ``1/dt^2 = sum 1/dt_i^2``, which
 does not bound the mixed condition, so :meth:`QuietBoundary.stable_dt` reports ``sqrt(2) m / c``
-(``2 m / c`` over ``sqrt 2``): then every combined step times a safety factor up to 0.93
+(``2 m / c`` over ``sqrt 2``): then every combined step times a time-step fraction up to 0.93
 satisfies the condition above for any ``omega`` the other limits allow (``s^2 + 1/8 < 1``).
 """
 from __future__ import annotations

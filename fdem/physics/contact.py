@@ -38,8 +38,8 @@ Use
     topo = build_topology(mesh)
     contact = ContactSet(topo, penalty=50 * E, friction_angle=35.0, mass=nodal_mass,
                          damping_ratio=0.0)
-    # the solver combines the limits as 1 / sqrt(sum 1/dt_i^2), times its safety factor
-    dt = safety * (dt_elements**-2 + dt_cracks**-2 + contact.stable_dt(nodal_mass)**-2) ** -0.5
+    # the solver combines the limits as 1 / sqrt(sum 1/dt_i^2), times its time-step fraction
+    dt = dt_fraction * (dt_elements**-2 + dt_cracks**-2 + contact.stable_dt(nodal_mass)**-2) ** -0.5
     # each step (forces ON nodes, added into f):
     contact.add_forces(x, v, f, dt, step)
     # when crack elements break:
@@ -681,7 +681,7 @@ class ContactSet:
         For a regular mesh (``m = rho L h / 6``) this is ``dt = (h / 3) sqrt(rho / p)``: the
         ``h sqrt(rho/p)`` of verification.md with the constant worked out. Taken over every
         triangle (any may become a contactor), so it does not change as cracks break. The
-        solver applies its own safety factor.
+        solver applies its own time-step fraction (dt_fraction).
         """
         mass = np.asarray(mass, dtype=np.float64)
         if mass.shape != (self.topology.n_nodes,):

@@ -513,8 +513,8 @@ class CrackSet:
     def stable_dt(self, mass: np.ndarray) -> float:
         """Critical time step of the crack penalties alone [s]: ``2 / omega_max`` with
         ``omega^2 <= K_a/m_a + K_b/m_b`` per node pair, ``K`` the summed end stiffness
-        ``max(k_n, k_t, k_c) L0/2`` [N/m] on a node (``k_c``: the compression stiffness), ``m`` the node mass [kg/m]. Apply a safety
-        factor in the solver (and take the minimum with the triangles' and contact's)."""
+        ``max(k_n, k_t, k_c) L0/2`` [N/m] on a node (``k_c``: the compression stiffness), ``m`` the node mass [kg/m]. Apply the time-step fraction
+        in the solver (and take the minimum with the triangles' and contact's)."""
         mass = np.asarray(mass, dtype=np.float64)
         if mass.shape != (self.topology.n_nodes,):
             raise ValueError(f"mass must have shape ({self.topology.n_nodes},), got {mass.shape}")

@@ -134,10 +134,11 @@ class Simulation:
     ----------
     model : Model
     dt : float, optional
-        Time step [s]; default ``safety`` times the critical step. A value above the critical
+        Time step [s]; default ``dt_fraction`` times the critical step. A value above the critical
         step is refused with a ``ValueError`` that states the stable value.
-    safety : float
-        Fraction of the critical step used when ``dt`` is automatic (default 0.8).
+    dt_fraction : float
+        Fraction of the critical step used when ``dt`` is automatic (default 0.8): the
+        time-step factor, not to be read as a factor of safety.
     out_dir : path, optional
         Where ``<name>.pvd``, ``<name>_cracks.pvd``, ``history.csv``, pictures and state files
         go; ``None`` writes nothing.
@@ -157,13 +158,13 @@ class Simulation:
         of a 180k-triangle frame at about 13 times the write time).
     """
 
-    def __init__(self, model: Model, dt: float | None = None, safety: float = 0.8, out_dir=None,
+    def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
                  output_fields=None, compression: str | None = None):
-        if not 0.0 < safety <= 1.0:
-            raise ValueError(f"safety factor must lie in (0, 1], got {safety}")
+        if not 0.0 < dt_fraction <= 1.0:
+            raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         self.model = model
-        self.safety = safety
+        self.dt_fraction = dt_fraction
         self.user_dt = dt
         self.out_dir = Path(out_dir) if out_dir is not None else None
         self.name = name
@@ -257,7 +258,7 @@ class Simulation:
     def _choose_dt(self) -> float:
         crit, limits = self.critical_dt()
         if self.user_dt is None:
-            return self.safety * crit
+            return self.dt_fraction * crit
         if not self.user_dt > 0:
             raise ValueError(f"time step must be positive, got {self.user_dt}")
         if self.user_dt > crit:
@@ -265,7 +266,7 @@ class Simulation:
             raise ValueError(
                 f"time step {self.user_dt:.6g} s exceeds the stable time step {crit:.6g} s "
                 f"(critical step combining: {parts}); use dt <= {crit:.6g} s, or dt=None for the "
-                f"automatic {self.safety * crit:.6g} s (safety factor {self.safety})")
+                f"automatic {self.dt_fraction * crit:.6g} s (dt_fraction {self.dt_fraction})")
         return float(self.user_dt)
 
     def set_gravity(self, gx: float, gy: float) -> None:
@@ -485,7 +486,7 @@ class Simulation:
                     triangle = int(np.flatnonzero((self.triangles == node).any(1))[0])
         where = self.x0[self.triangles[triangle]].mean(0)
         crit, _ = self.critical_dt()
-        suggested = 0.5 * min(self.dt, self.safety * crit)
+        suggested = 0.5 * min(self.dt, self.dt_fraction * crit)
         path = self._write_state("last_good_state", self._good)
         saved = (f"; last good state (step {self._good.step}, t = {self._good.time:.6g} s) written to {path}"
                  if path else "")

@@ -61,7 +61,7 @@ class SlopeWorkflow:
         the free-fall time over the model height ``H``)
     rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
         its peak for one response time (default 0.01)
-    runout_safety : time-step factor of the runout stage (default 0.4; the other stages use the
+    runout_dt_fraction : time-step factor of the runout stage (default 0.4; the other stages use the
         simulation's, 0.8 by default). Impacts need the smaller step: on the demo slope the runout
         distance at 0.8 was 15.5 +- 0.3 m against 14.3 +- 0.7 m at 0.4 and 13.7 m at 0.2
         (docs/pareto.md), and a two-body impact loses 1.5 % of its energy at 0.8, 0.25 % at 0.4.
@@ -77,7 +77,7 @@ class SlopeWorkflow:
     fail_displacement: float | None = None
     runout_time: float | None = None
     rest_kinetic_ratio: float = 0.01
-    runout_safety: float | None = 0.4
+    runout_dt_fraction: float | None = 0.4
 
     def __post_init__(self):
         if self.reduction not in ("steps", "rate"):
@@ -88,8 +88,8 @@ class SlopeWorkflow:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"SlopeWorkflow.{name} must be positive and finite, got {v!r}")
-        if self.runout_safety is not None and not 0.0 < self.runout_safety <= 1.0:
-            raise ValueError(f"SlopeWorkflow.runout_safety (time-step factor) must lie in (0, 1], got {self.runout_safety}")
+        if self.runout_dt_fraction is not None and not 0.0 < self.runout_dt_fraction <= 1.0:
+            raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got {self.runout_dt_fraction}")
 
 
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
@@ -180,12 +180,12 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
 
 def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     """The dynamic runout stage of the workflow: no damping, time-step factor
-    ``wf.runout_safety``; ends when the kinetic energy has stayed below
+    ``wf.runout_dt_fraction``; ends when the kinetic energy has stayed below
     ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
     ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
     the model height ``H`` [m] under gravity ``g`` [m/s^2])."""
     cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
-    return Stage("runout", max_time=cap, damping=NO_DAMPING, safety=wf.runout_safety,
+    return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
                  converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T))
 
 

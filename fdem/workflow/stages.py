@@ -115,8 +115,8 @@ class Stage:
     check_interval : simulated time [s] between checks of the rules (default ``T / 40``)
     output_interval : simulated time [s] between output frames (default: 4 per stage)
     monitor : nodes the rules watch (a group name, predicate or ids; default all nodes)
-    safety : time-step factor of the stage, the fraction of the critical step (``None``: the
-        simulation's ``safety``; ignored when the simulation has a user time step). The
+    dt_fraction : time-step factor of the stage, the fraction of the critical step (``None``: the
+        simulation's ``dt_fraction``; ignored when the simulation has a user time step). The
         simulation's own factor is restored when the stage ends.
     """
 
@@ -134,13 +134,13 @@ class Stage:
     check_interval: float | None = None
     output_interval: float | None = None
     monitor: object = None
-    safety: float | None = None
+    dt_fraction: float | None = None
 
     def __post_init__(self):
         if not self.name:
             raise ValueError("a stage needs a name")
-        if self.safety is not None and not 0.0 < self.safety <= 1.0:
-            raise ValueError(f"stage {self.name!r}: safety (time-step factor) must lie in (0, 1], got {self.safety}")
+        if self.dt_fraction is not None and not 0.0 < self.dt_fraction <= 1.0:
+            raise ValueError(f"stage {self.name!r}: dt_fraction (time-step factor) must lie in (0, 1], got {self.dt_fraction}")
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
         _positive_or_none(self.max_time, f"stage {self.name!r}: max_time")
         _positive_or_none(self.reduction, f"stage {self.name!r}: reduction")
@@ -246,13 +246,13 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     if fail is not None:
         fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
     length = stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T)
-    sim_safety = sim.safety
+    sim_dt_fraction = sim.dt_fraction
     try:
-        if stage.safety is not None:
-            sim.safety = stage.safety
+        if stage.dt_fraction is not None:
+            sim.dt_fraction = stage.dt_fraction
         sim.dt = sim._choose_dt()
     except ValueError:
-        sim.safety = sim_safety
+        sim.dt_fraction = sim_dt_fraction
         raise
     dt = sim.dt
     check_steps = max(1, int(round((stage.check_interval or T / 40.0) / dt)))
@@ -315,7 +315,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         sim.run(t_end=t0 + length, damping=stage.damping, stage=stage.name, history_every=check_steps,
                 output_every=output_steps, stop_when=rule, final_output=frames)
     finally:
-        sim.safety = sim_safety   # the next stage chooses its step afresh
+        sim.dt_fraction = sim_dt_fraction   # the next stage chooses its step afresh
     wall = time.perf_counter() - wall
     reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
     if reason == "capped":
