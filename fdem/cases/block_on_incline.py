@@ -11,7 +11,7 @@ body together. Exact answers:
   when ``b / h < tan theta``.
 
 Dynamic stage: element damping (a fraction of critical of each triangle's highest mode,
-:meth:`fdem.model.Model.set_element_damping`, default ``DEFAULT_ELEMENT_DAMPING``) keeps the
+:meth:`fdem.solve.model.Model.set_element_damping`, default ``DEFAULT_ELEMENT_DAMPING``) keeps the
 constant-strain triangles from ringing; ``--element-damping 0`` runs undamped
 (``docs/damping.md``).
 

@@ -103,25 +103,14 @@ def stop_cleanly_on_signals() -> None:
 
 
 def cap_simulated_time(sim, t_max: float | None) -> None:
-    """Stop every later :meth:`~fdem.solver.Simulation.run` of ``sim`` at simulated time
-    ``t_max`` [s] (``None``: no cap). Stages end ``capped`` or ``completed`` at the cap; a
-    factor-of-safety search restarts from its saved state, so each trial is capped alike."""
-    if t_max is None:
-        return
-    run = sim.run
-
-    def capped(n_steps=None, t_end=None, **kwargs):
-        if t_end is not None:
-            t_end = min(t_end, t_max)
-        elif n_steps is not None:
-            n_steps = min(n_steps, max(0, math.ceil((t_max - sim.state.time) / sim.dt - 1e-9)))
-        return run(n_steps=n_steps, t_end=t_end, **kwargs)
-
-    sim.run = capped
-    sim.time_cap = float(t_max)
+    """Stop every later :meth:`~fdem.solve.simulation.Simulation.run` of ``sim`` at simulated
+    time ``t_max`` [s] (``None``: no cap): sets :attr:`Simulation.time_cap`. Stages end
+    ``capped`` or ``completed`` at the cap; a factor-of-safety search restarts from its saved
+    state, so each trial is capped alike."""
+    if t_max is not None:
+        sim.time_cap = float(t_max)
 
 
 def time_capped(sim) -> bool:
-    """True when ``sim`` ran up to its ``--max-time`` cap."""
-    cap = getattr(sim, "time_cap", None)
-    return cap is not None and sim.state.time >= cap - 0.5 * sim.dt
+    """True when ``sim`` ran up to its ``--max-time`` cap (:attr:`Simulation.time_capped`)."""
+    return sim.time_capped

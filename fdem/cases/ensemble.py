@@ -1,8 +1,8 @@
-"""A stochastic ensemble of the planar-failure slope (:mod:`fdem.ensembles`, docs/ensembles.md).
+"""A stochastic ensemble of the planar-failure slope (:mod:`fdem.workflow.ensembles`, docs/ensembles.md).
 
 The scene (:class:`PlanarDFNScene`) is the no-crack planar slope of ``cases/planar_failure.py``
 (H = 10 m, face 60 deg, sliding plane 35 deg, gamma = 25 kN/m^3) with a
-:class:`fdem.geometry.StochasticSet` of additional joints in the block above the plane. What
+:class:`fdem.geometry.joint_sets.StochasticSet` of additional joints in the block above the plane. What
 is uncertain, per realization:
 
 * ``cohesion`` of the sliding plane: lognormal, mean 12 kPa, sd 4 kPa (the Hoek-Bray FoS at
@@ -60,7 +60,7 @@ class PlanarDFNScene:
 
     def block_corners(self) -> np.ndarray:
         """(3, 2) corners of the block above the plane [m], counter-clockwise: the daylight point
-        ``D = (0.3 H + 0.2 H cot psi_f, 0.5 H)`` (:func:`fdem.scenes.planar_slope_geometry`), the
+        ``D = (0.3 H + 0.2 H cot psi_f, 0.5 H)`` (:func:`fdem.cases.planar_failure.planar_slope_geometry`), the
         plane's upper end ``E = D + H (cot psi_p, 1)`` and the crest ``D + H (cot psi_f, 1)``."""
         from fdem.cases.planar_failure import HEIGHT
 
@@ -72,7 +72,7 @@ class PlanarDFNScene:
 
     def cross_joints(self, dfn_seed: int = 0, trace_length: float = 3.0, dip_scatter: float = 10.0,
                      joints: int = 4) -> np.ndarray:
-        """(k, 2, 2) cross-joint segments [m]: a :class:`fdem.geometry.StochasticSet` (centres
+        """(k, 2, 2) cross-joint segments [m]: a :class:`fdem.geometry.joint_sets.StochasticSet` (centres
         uniform in the block's bounding box, lognormal lengths of mean ``trace_length`` and
         coefficient of variation 0.3, dips normal about 90 deg with sd ``dip_scatter``) clipped
         to the block, with the ends that reach the sliding plane pulled back along the joint to

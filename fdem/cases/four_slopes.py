@@ -2,16 +2,16 @@
 
 Meshes a 15 m slope with its brick-pattern DFN, starts it in static equilibrium, reduces the
 strength of crack elements, joints and contact until it fails, and follows the failure and
-runout to rest (:mod:`fdem.workflow`).
+runout to rest (:mod:`fdem.workflow.slope`).
 
 Writes to ``--out``: the mesh (``.msh``, a PNG and a ``.vtu`` with crack elements as line cells),
 ``slope.pvd`` and ``slope_cracks.pvd`` (open them in ParaView), ``history.csv`` (energy ledger
 and monitors per stage), ``summary.json`` (every stage and why it ended, the factor of safety
 when searched, runout distance and volume, displacement percentiles, kinetic energy, cracks by
-mode, fragments, events: :class:`fdem.report.RunReport`), ``events.csv`` and the pictures
+mode, fragments, events: :class:`fdem.results.report.RunReport`), ``events.csv`` and the pictures
 ``failure.png``, ``kinetic_energy.png``, ``cracks_by_mode.png`` (plus a PNG per output frame),
 and checkpoints ``runout_start.npz`` (the failed state the runout starts from) and
-``final_state.npz`` (:func:`fdem.checkpoint.load_checkpoint`).
+``final_state.npz`` (:func:`fdem.solve.checkpoint.load_checkpoint`).
 
     fdem run four-slopes --out runs/low_fine                           # the workflow at size 0.5
     fdem run four-slopes --angle high --spacing coarse --size 0.3 --out runs/high_coarse
@@ -125,7 +125,7 @@ SIZE = 0.5
 def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
           joint_offset: float | None = None):
     """Geometry, mesh and topology of one of the four slopes (``joint_offset``: where the
-    persistent joints sit relative to the toe, :func:`fdem.scenes.four_slope_geometry`)."""
+    persistent joints sit relative to the toe, :func:`four_slope_geometry`)."""
     from fdem.mesh.triangulate import mesh_geometry
     from fdem.cases.four_slopes import four_slope_geometry
     from fdem.mesh.topology import build_topology
@@ -149,7 +149,7 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity.
 
     ``start="static"`` (default) puts it in static equilibrium with pre-loaded crack elements
-    (:func:`fdem.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
+    (:func:`fdem.solve.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
     laterally confined stress ``sigma_xx = K0 sigma_yy`` of a flat ground instead (not in
     equilibrium under the face: it needs a damped settling stage). Returns ``(sim, cracks)``."""
     from fdem.physics.cracks import CrackSet
@@ -261,7 +261,6 @@ def main(argv=None) -> dict:
             save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
         finally:
             sim.close()
-        result.pop("_fos_result", None)
         summary.update({"workflow": result, "outcome": result["outcome"],
                         "failed_at_factor": result["failed_at_factor"],
                         **factor_of_safety_figures(result),

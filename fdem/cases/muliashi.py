@@ -4,7 +4,7 @@ to failure, step-path failure surface, micro-cracks by mode, fragments, micro-se
 The paper raised the particle density from 2560 to 25,600 kg/m^3 until the slope failed. Here
 gravity is multiplied by a factor ``k`` (same statics as a density factor, real mass in the
 dynamics) and the critical factor is found by the factor-of-safety search
-(:class:`fdem.stages.GravityIncrease`); the slope is then loaded past it and followed to rest.
+(:class:`fdem.workflow.fos.GravityIncrease`); the slope is then loaded past it and followed to rest.
 
 Crack-element properties from the macro properties (the paper's particle-scale table does not
 carry over to FDEM; every choice is a keyword of :func:`property_sets`):

@@ -5,11 +5,11 @@ slope" is ``+x``. A deformable block rests on a base body with friction ``phi > 
 sticks under gravity alone). After a settling interval ``t_settle`` the base moves along the
 plane with the velocity of a one-cycle sine acceleration pulse ``a_b(t) = -A sin(2 pi t / T)``
 (up the slope first, the base ends at rest), prescribed on every base node
-(:func:`fdem.shaking.shake_base`). The block slips down the slope relative to the base while
+(:func:`fdem.physics.shaking.shake_base`). The block slips down the slope relative to the base while
 ``-a_b`` exceeds the yield acceleration ``a_y = g (cos theta tan phi - sin theta)``.
 
 Exact answer: Newmark's (1965) rigid block, integrated exactly for the same piecewise-linear
-history (:func:`fdem.shaking.newmark_response`). Compared: the block's permanent displacement
+history (:func:`fdem.reference.newmark.newmark_response`). Compared: the block's permanent displacement
 relative to the base (mean over the block's nodes minus the base's, from the start of shaking).
 
     fdem run newmark-block --out docs/verification           # three mesh sizes: docs/verification/newmark.json

@@ -1,6 +1,6 @@
 """Planar slope failure (verification.md): the factor of safety of a slope with one persistent
 joint daylighting in the face, by strength reduction with the full solver, against the
-Hoek-Bray limit-equilibrium value (:func:`fdem.limit_equilibrium.planar_fos`).
+Hoek-Bray limit-equilibrium value (:func:`fdem.reference.hoek_bray.planar_fos`).
 
 The scene (:func:`planar_failure_simulation`) is built so that the limit-equilibrium
 assumptions hold: a rigid block on a perfectly plastic plane.
@@ -20,7 +20,7 @@ assumptions hold: a rigid block on a perfectly plastic plane.
   a trial, and the stable step is twice what ``10 E`` allows. Contact (same penalty, below
   Munjiza's ``alpha = 10..100``) carries nothing here: the joints never break and the block
   slides out into air.
-* Supports: bottom fixed, sides on rollers; a geostatic start (:func:`fdem.geostatic.geostatic_start`)
+* Supports: bottom fixed, sides on rollers; a geostatic start (:func:`fdem.solve.geostatic.geostatic_start`)
   puts the slope in static equilibrium before any reduction.
 * Each strength-reduction trial (:func:`trial_stage`) is damped by mass-proportional damping
   critical for the slope's fundamental mode and judged by convergence of the unbalanced-force
@@ -67,7 +67,7 @@ def planar_slope_geometry(height: float, face_angle: float, plane_angle: float, 
                        toe_length: float | None = None, base_depth: float | None = None,
                        tension_crack_offset: float | None = None, toe_step: float | None = None) -> Geometry:
     """A slope with one persistent joint daylighting in the face: the planar-failure verification
-    problem (Hoek & Bray 1981, ch. 7; Wyllie & Mah 2004, ch. 6; :mod:`fdem.limit_equilibrium`).
+    problem (Hoek & Bray 1981, ch. 7; Wyllie & Mah 2004, ch. 6; :mod:`fdem.reference.hoek_bray`).
 
     ``height`` H [m] is the face above the daylight point ``D`` of the plane, ``face_angle``
     psi_f and ``plane_angle`` psi_p [deg] (``psi_p < psi_f``). Joint set 1 is the sliding plane,
@@ -151,7 +151,7 @@ class PlanarScene:
     cracks: CrackSet
     contact: ContactSet
     block_nodes: np.ndarray       # exploded nodes of the sliding block
-    geostatic: object             # fdem.geostatic.GeostaticReport
+    geostatic: object             # fdem.solve.geostatic.GeostaticReport
     n_triangles: int
 
 
@@ -191,7 +191,7 @@ def planar_failure_simulation(geometry, size: float, cohesion: float = JOINT_COH
                               friction_angle: float = JOINT_FRICTION, penalty: float = PENALTY,
                               out_dir: Path | None = None, pictures: bool = False,
                               progress: bool = False) -> PlanarScene:
-    """Mesh ``geometry`` (a :func:`fdem.scenes.planar_slope_geometry`) at ``size`` [m] and build the
+    """Mesh ``geometry`` (a :func:`fdem.cases.planar_failure.planar_slope_geometry`) at ``size`` [m] and build the
     simulation: elastic rock, crack elements (:func:`property_sets`), contact with the joint's
     friction, bottom fixed, sides on rollers, gravity, and a static geostatic start."""
     topo = build_topology(mesh_geometry(geometry, size))
@@ -238,7 +238,7 @@ def trial_stage(sim: Simulation, periods: float = 5.0, unbalanced_ratio: float =
     """The damped trial of the strength-reduction search for this scene.
 
     Damping: mass-proportional, ``alpha = 2 omega_1 = 4 pi / T`` [1/s], critical for the
-    fundamental mode of period ``T = 4 H / c_s`` (:func:`fdem.stages.response_time`). It
+    fundamental mode of period ``T = 4 H / c_s`` (:func:`fdem.workflow.stages.response_time`). It
     vanishes at rest, so a converged state is the static equilibrium whatever its value, and
     it brings a stable slope to ``R < 1e-4`` within about 1.5 T; Cundall's local damping
     (0.8) needs over 10 T here, and its force ``0.8 |f|`` on every node of a sliding block,
@@ -260,7 +260,7 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
              out_dir: Path | None = None, pictures: bool = False, max_time: float | None = None,
              **fos_options) -> dict:
     """Factor of safety of geometry ``name`` (:data:`GEOMETRIES`) at mesh ``size`` [m] by
-    strength reduction (:func:`fdem.stages.factor_of_safety`), with the analytic value.
+    strength reduction (:func:`fdem.workflow.fos.factor_of_safety`), with the analytic value.
     ``max_time`` [s]: cap on each trial's simulated time (a smoke run: capped trials count as
     failing, so its factor of safety means nothing)."""
     from fdem.cases.common import cap_simulated_time

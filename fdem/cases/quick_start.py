@@ -2,8 +2,8 @@
 
 A 12 m slope with a 60 deg face; a persistent joint set dipping 30 deg out of the face (one
 joint through the toe) crossed by perpendicular cross joints in a brick pattern (blocks 2 m x
-4 m). The slope starts in static equilibrium (:func:`fdem.geostatic.geostatic_start`), then
-:func:`fdem.workflow.run_slope_workflow` checks equilibrium at F = 1, searches the factor of
+4 m). The slope starts in static equilibrium (:func:`fdem.solve.geostatic.geostatic_start`), then
+:func:`fdem.workflow.slope.run_slope_workflow` checks equilibrium at F = 1, searches the factor of
 safety by strength reduction, reduces the strength in steps (1/0.9, 1/0.8, ...) until the slope
 fails, and follows the runout at the failing factor until the rock comes to rest.
 
@@ -143,7 +143,6 @@ def main(argv=None) -> dict:
         result = run_slope_workflow(sim, SlopeWorkflow(fos=FOS_BRACKET if args.fos else None), out_dir=out)
     finally:
         sim.close()
-    result.pop("_fos_result", None)
     extra = {"case": NAME, "size_m": args.size, "threads": threads, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
              "geostatic_seconds": start.seconds, "workflow": result,
              "failed_at_factor": result["failed_at_factor"], "outcome": result["outcome"],

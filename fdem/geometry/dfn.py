@@ -1,4 +1,5 @@
-"""Slope profiles, joint sets and the discrete fracture network (DFN), in plane section.
+"""The discrete fracture network (DFN) in plane section: joint traces clipped to the bodies, merged,
+split at crossings and snapped (:class:`DFN`).
 
 Conventions
 -----------
@@ -8,10 +9,11 @@ Conventions
   in degrees, ``0 <= dip < 180``. With the toe on the left, a joint with ``0 < dip < face angle``
   daylights in the face (an "inclined" or low-angle set); ``dip > 90`` dips into the slope
   (an "anti-inclined" set).
-* Joint sets are numbered from 1 in the order they are given to :class:`Geometry`; 0 is reserved
+* Joint sets are numbered from 1 in the order they are given to
+  :class:`~fdem.geometry.section.Geometry`; 0 is reserved
   for intact rock bridges.
 
-No solver imports here: this module only describes geometry.
+No solver imports here: this subpackage only describes geometry.
 """
 from __future__ import annotations
 

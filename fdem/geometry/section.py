@@ -19,7 +19,7 @@ __all__ = ["Geometry"]
 @dataclass(frozen=True)
 class Geometry:
     """Bodies and joint sets of a plane-strain section (what Gmsh meshes; the mechanical model
-    built on its mesh is :class:`fdem.model.Model`).
+    built on its mesh is :class:`fdem.solve.model.Model`).
 
     ``bodies`` are polygons that may touch but not overlap; separate bodies share no nodes in the
     mesh and interact only by contact (e.g. a block resting on an incline). ``joint_sets`` are

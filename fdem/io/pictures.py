@@ -62,7 +62,7 @@ def _same_length(**arrays) -> int:
 
 def mode_codes(mode) -> np.ndarray:
     """Failure modes as integers 0 (none), 1 (I), 2 (II), 3 (mixed), from those integers or from
-    the strings ``"I"``, ``"II"``, ``"mixed"`` of :data:`fdem.cohesive.EVENT_DTYPE`."""
+    the strings ``"I"``, ``"II"``, ``"mixed"`` of :data:`fdem.physics.cracks.EVENT_DTYPE`."""
     mode = np.asarray(mode)
     if mode.dtype.kind in "US":
         bad = sorted(set(mode.tolist()) - set(_MODE_CODE))
@@ -81,7 +81,7 @@ def failure_frame(path: str | os.PathLike, x: np.ndarray, triangles, displacemen
     Parameters
     ----------
     x : (n_nodes, 2) current node positions [m]
-    triangles : (n_tri, 3) node ids, or a :class:`fdem.topology.Topology` (its ``triangles``)
+    triangles : (n_tri, 3) node ids, or a :class:`fdem.mesh.topology.Topology` (its ``triangles``)
     displacement : (n_tri,) per triangle or (n_nodes,) per node displacement magnitude [m]
         (per node values are averaged over each triangle: flat shading)
     crack_segments : (n_crack, 2, 2) end points of every crack element [m], or the

@@ -1,4 +1,4 @@
-"""Results on disk: VTU + PVD series for ParaView, CSV histories, PNG pictures, state files.
+"""VTU + PVD series for ParaView: triangles and crack elements of every output frame.
 
 * :func:`write_vtu` writes an unstructured grid as VTK XML with *raw appended binary* data
   (no base64: one ``tobytes`` per array, fast for 1e5..1e6 cells), optionally compressed
@@ -7,10 +7,9 @@
   read it (sizes and times in ``docs/outputs.md``).
 * :class:`PvdSeries` numbers the ``.vtu`` files of a time series and rewrites the ``.pvd``
   collection after every frame, so a run that stops early still leaves a valid series.
-* :class:`HistoryWriter` appends one CSV row per record and flushes it.
-* :func:`render_png` draws a cell field on the deformed triangles with matplotlib (Agg,
-  off-screen, no display needed).
-* :func:`save_state` / :func:`load_state`: ``.npz`` of the solver state.
+
+The history table is :mod:`fdem.io.history`, state files :mod:`fdem.io.npz`, pictures
+:mod:`fdem.io.pictures`.
 """
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""Numba kernels for triangle-triangle contact: binned-grid broad phase and pair forces.
+"""Numba kernels for triangle-triangle contact: the pair law and the pair forces (narrow phase).
+
+The broad phase (boxes, binned grid) is :mod:`fdem.kernels.contact_search`.
 
 Narrow phase: the distributed-potential penalty method of Munjiza & Andrews (2000), "Penalty
 function method for combined finite-discrete element systems comprising large number of separate

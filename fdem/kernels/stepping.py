@@ -22,35 +22,54 @@ Energy ledger, consistent with the scheme (exact for linear forces): the kinetic
 step n is ``K_n = sum m v_{n-1/2} . v_{n+1/2} / 2``, and a non-conservative force ``f_n``
 does the work ``f_n . (x_{n+1} - x_{n-1}) / 2 = f_n . dt (v_{n-1/2} + v_{n+1/2}) / 2`` in step n;
 then ``K_{n+1} - K_n`` equals the trapezoidal work of all forces over ``[x_n, x_{n+1}]``.
-Every step returns the sums the solver needs; see :data:`LEDGER_FIELDS`.
+Every step returns the sums the solver needs; see :class:`StepSums`.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 from numba import njit, prange
 from fdem.kernels.triangles import (FASTMATH, TC_B00, TC_B01, TC_B10, TC_B11, TC_INV_MASS, TC_LAM, TC_MASS, TC_MU, TC_S0XX, TC_S0XY, TC_S0YY, corner_forces, svk_piola, triangle_response, velocity_gradient_power)
 
-__all__ = ["LEDGER_FIELDS", "damped_velocity", "constrain_and_move", "advance_node", "BLOCK", "n_blocks",
+__all__ = ["StepSums", "LEDGER_FIELDS", "damped_velocity", "constrain_and_move", "advance_node", "BLOCK", "n_blocks",
            "step_exploded", "advance_node_elastic", "step_exploded_elastic", "triangle_pass", "viscous_power",
            "node_pass"]
 
 
-LEDGER_FIELDS = ("strain", "kinetic", "gravity_moment", "external_moment",
-                 "damping_early", "damping_late", "viscous_early", "viscous_late",
-                 "reaction_early", "reaction_late", "interaction_early", "interaction_late", "n_inverted")
-"""Names of the values returned by the step kernels, in order.
+class StepSums(NamedTuple):
+    """What one step returns, by name: every step path (fused exploded, fast elastic, conforming
+    two-pass) hands the solver these fields in this order.
 
-* ``strain``: elastic strain energy at ``x_n`` [J/m];
-* ``kinetic``: ``sum m v_{n-1/2} . v_{n+1/2} / 2`` [J/m];
-* ``gravity_moment``: ``sum m g . x_n`` (the gravitational potential is minus its change) [J/m];
-* ``external_moment``: ``sum f_ext . x_n`` (constant external loads, same convention) [J/m];
-* ``<kind>_early`` / ``<kind>_late``: the halves ``f_n . dt v_{n-1/2} / 2`` and
-  ``f_n . dt v_{n+1/2} / 2`` of the step's work for each non-conservative force kind:
-  ``damping`` and ``viscous`` as energy *dissipated* (minus the work), ``reaction`` (supports
-  and prescribed velocities) and ``interaction`` (providers) as work done *on* the body [J/m].
-  The solver needs the halves to keep the ledger exact: with ``K_n`` as above,
-  ``K_N + U_N - K_0 - U_0 = sum_{n<N} (early_n + late_n) + early_N - early_0`` for linear forces;
-* ``n_inverted``: number of triangles with ``det F <= 0`` (or NaN) at ``x_n``.
-"""
+    * ``strain``: elastic strain energy at ``x_n`` [J/m] (0 on steps that skip the energies);
+    * ``kinetic``: ``sum m v_{n-1/2} . v_{n+1/2} / 2`` [J/m];
+    * ``gravity_moment``: ``sum m g . x_n`` (the gravitational potential is minus its change) [J/m];
+    * ``external_moment``: ``sum f_ext . x_n`` (constant external loads, same convention) [J/m];
+    * ``<kind>_early`` / ``<kind>_late``: the halves ``f_n . dt v_{n-1/2} / 2`` and
+      ``f_n . dt v_{n+1/2} / 2`` of the step's work for each non-conservative force kind:
+      ``damping`` and ``viscous`` as energy *dissipated* (minus the work), ``reaction`` (supports
+      and prescribed velocities) and ``interaction`` (providers) as work done *on* the body [J/m].
+      The ledger needs the halves to stay exact: with ``K_n`` as above,
+      ``K_N + U_N - K_0 - U_0 = sum_{n<N} (early_n + late_n) + early_N - early_0`` for linear forces;
+    * ``n_inverted``: number of triangles with ``det F <= 0`` (or NaN) at ``x_n``.
+    """
+
+    strain: float
+    kinetic: float
+    gravity_moment: float
+    external_moment: float
+    damping_early: float
+    damping_late: float
+    viscous_early: float
+    viscous_late: float
+    reaction_early: float
+    reaction_late: float
+    interaction_early: float
+    interaction_late: float
+    n_inverted: int
+
+
+LEDGER_FIELDS = StepSums._fields
+"""Names of the values :func:`step_exploded` returns, in order (the fields of :class:`StepSums`)."""
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")

@@ -1,6 +1,7 @@
-"""Conforming triangle meshes: the Mesh dataclass, meshio read/write, quality report.
+"""Conforming triangle meshes: the Mesh dataclass, meshio read/write, structured test meshes.
 
-Gmsh meshing of a :class:`fdem.geometry.Geometry` lives in :mod:`fdem.meshing`; this module needs
+Gmsh meshing of a :class:`fdem.geometry.section.Geometry` lives in :mod:`fdem.mesh.triangulate`,
+the quality report in :mod:`fdem.mesh.quality`; this module needs
 neither Gmsh nor the geometry, so the solver and the tests can build meshes without them.
 """
 from __future__ import annotations

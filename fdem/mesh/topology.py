@@ -197,7 +197,7 @@ def build_topology(mesh: Mesh) -> Topology:
 
 @dataclass(frozen=True)
 class ConformingTopology:
-    """A conforming (shared-node) triangle mesh with the interface of :class:`fdem.topology.Topology`.
+    """A conforming (shared-node) triangle mesh with the interface of :class:`fdem.mesh.topology.Topology`.
 
     Attributes
     ----------

@@ -1,4 +1,4 @@
-"""Gmsh triangulation of a :class:`fdem.geometry.Geometry` conforming to its DFN, and mesh quality.
+"""Gmsh triangulation of a :class:`fdem.geometry.section.Geometry` conforming to its DFN (:func:`mesh_geometry`).
 
 The geometry module has already clipped the joints, merged their overlaps and split them at
 every crossing, so the model reaches Gmsh as a planar straight-line graph: boundary pieces form

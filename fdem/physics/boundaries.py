@@ -11,7 +11,7 @@ Kuhlemeyer 1969):
 with ``v_n = v . n`` and ``v_s = v . s`` the normal and tangential velocities of the boundary,
 ``n`` its outward normal, ``s`` its tangent, and the wave speeds of the 2D model
 ``c_p = sqrt((lambda + 2 mu) / rho)``, ``c_s = sqrt(mu / rho)`` (``lambda``, ``mu`` the 2D Lame
-constants of :meth:`fdem.model.Model.lame_arrays`: plane strain, or the plane-stress
+constants of :meth:`fdem.solve.model.Model.lame_arrays`: plane strain, or the plane-stress
 ``lambda``). The tractions are lumped to the nodes: each external edge of length ``L`` gives
 each of its two (exploded) nodes the dashpot matrix
 
@@ -91,7 +91,7 @@ class QuietBoundary:
 
     Parameters
     ----------
-    model : fdem.model.Model
+    model : fdem.solve.model.Model
         Supplies the topology, the triangles' density and 2D Lame constants.
     where : str, sequence of str, or callable
         Physical group name(s) (``"left"``, ``"right"``, ``"bottom"``: an edge is selected when

@@ -1,4 +1,6 @@
-"""Pure elastic laws: Lame constants, plane strain / plane stress, wave speeds, stable steps.
+"""Pure elastic laws: Lame constants, plane strain / plane stress, wave speeds, stress invariants.
+
+Critical time steps and viscosities are :mod:`fdem.physics.stability`.
 
 Everything here is a small function of numbers or arrays, with no solver state, so the laws
 can be tested alone and reused by the kernels (which receive the numbers, never the objects).
@@ -120,7 +122,7 @@ class ElasticMaterial:
     viscosity : float
         ``eta`` [Pa s] of the viscous stress ``S_v = eta dE/dt``; 0 for a conservative solid.
         Element-scale damping depends on the element size, so set it per triangle with
-        :meth:`fdem.model.Model.set_element_damping` (a fraction of :func:`critical_viscosity`,
+        :meth:`fdem.solve.model.Model.set_element_damping` (a fraction of :func:`critical_viscosity`,
         about ``1.19 h sqrt(E rho)`` at ``nu = 0.25``; Munjiza 2004, sec. 4.2, uses ``2 h sqrt(E rho)``).
     plane : str
         ``"strain"`` (default) or ``"stress"``.

@@ -16,11 +16,11 @@ and the contact friction of every face ``mu_F = mu / F``. The tensile strength i
 default because the four-slope paper reduces "the cohesive and frictional strength" of the
 crack elements, and in a cohesive crack element the tensile strength is part of the cohesive
 strength. Fracture energies and penalties are kept. ``F = 1`` is the material as given; the
-factor of safety is the ``F`` at which the slope fails (:mod:`fdem.stages`).
+factor of safety is the ``F`` at which the slope fails (:mod:`fdem.workflow.stages`).
 
 Friction belongs to the interface, not to the triangle: a contact pair across a broken crack
 element uses that element's residual friction; any other pair uses the lowest friction of the
-faces its two triangles expose (see :class:`fdem.contact.ContactSet`).
+faces its two triangles expose (see :class:`fdem.physics.contact.ContactSet`).
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ class Interfaces:
     Parameters
     ----------
     property_sets : mapping ``tag -> CrackProperties`` (or a sequence indexed by tag); tag 0 is
-        intact rock, ``j >= 1`` DFN joint set ``j`` (:class:`fdem.cohesive.CrackProperties`).
+        intact rock, ``j >= 1`` DFN joint set ``j`` (:class:`fdem.physics.crack_properties.CrackProperties`).
     surface_friction_angle : float, optional
         Friction angle [deg] of the external (never bonded) faces in contact; default: the
         residual friction of tag 0 (the rock itself), or 0 when there is no tag 0.

@@ -1,4 +1,7 @@
-"""Base shaking: acceleration histories, base excitation, and Newmark's rigid sliding block.
+"""Base shaking: acceleration histories and base excitation.
+
+Newmark's rigid sliding block, the closed form the shaking is verified against, is
+:mod:`fdem.reference.newmark`.
 
 Acceleration history
 --------------------
@@ -25,7 +28,7 @@ removes the linear trend of the velocity that brings it to rest at the last samp
 Base excitation
 ---------------
 :func:`shake_base` prescribes the history's velocity on the base nodes of a model through
-:meth:`fdem.model.Model.prescribe_velocity` (one condition per component with the velocity as
+:meth:`fdem.solve.model.Model.prescribe_velocity` (one condition per component with the velocity as
 ``history(t)``; the solver evaluates it at ``t_{n+1/2}``, where its leapfrog velocities live).
 The work the base does on the model is the solver's ``boundary_work``.
 
@@ -81,7 +84,7 @@ class AccelerationHistory:
 
     Zero before ``t[0]`` and after ``t[-1]`` (see the module docstring for the velocity and
     displacement). Call it as ``history.velocity(t)`` or hand ``history.velocity_component(k)``
-    to :meth:`fdem.model.Model.prescribe_velocity`.
+    to :meth:`fdem.solve.model.Model.prescribe_velocity`.
     """
 
     def __init__(self, t, ax, ay=None, baseline: str | None = None, name: str = "history"):
@@ -268,7 +271,7 @@ def shake_base(model, where, history: AccelerationHistory, components: str = "xy
     """Prescribe ``history``'s velocity on the nodes ``where`` selects (a group name, predicate or ids).
 
     Each component in ``components`` (``"x"``, ``"y"`` or ``"xy"``) becomes a velocity condition
-    ``v_k = 1 m/s * history.velocity_component(k)(t)`` (:meth:`fdem.model.Model.prescribe_velocity`);
+    ``v_k = 1 m/s * history.velocity_component(k)(t)`` (:meth:`fdem.solve.model.Model.prescribe_velocity`);
     a component left out stays free. The base moves rigidly; the solver books its work on the
     model as ``boundary_work``. Returns the node ids.
     """

@@ -250,7 +250,7 @@ def released_kinetic_energy(history: list[dict]) -> float:
 
 def history_columns(history, *names: str) -> tuple[np.ndarray, ...]:
     """Columns of a history (a list of row dicts as ``Simulation.history``, or the dict of arrays
-    of :func:`fdem.output.read_history`) as float arrays, one per name; a missing column is refused."""
+    of :func:`fdem.io.history.read_history`) as float arrays, one per name; a missing column is refused."""
     if isinstance(history, dict):
         cols = history
         missing = [n for n in names if n not in cols]

@@ -3,7 +3,7 @@ Gutenberg-Richter b-value and a comparison with a reference catalogue.
 
 Input: the crack breakages of a run, a structured array with at least the fields ``time`` [s],
 ``x``, ``y`` [m] (crack midpoint), ``length`` [m] and ``energy`` [J per metre of thickness]
-(:data:`fdem.cohesive.EVENT_DTYPE`, ``CrackSet.events``; ``mode`` is used when present).
+(:data:`fdem.physics.cracks.EVENT_DTYPE`, ``CrackSet.events``; ``mode`` is used when present).
 Everything here is a plain function of arrays, so it works on a live run or a saved state.
 
 Clustering (after Hazzard & Young 2002, *Tectonophysics* 356, 181-197, who group bond
@@ -126,7 +126,7 @@ def _check_breakages(breakages) -> np.ndarray:
         raise ValueError(f"breakages must be a structured array with fields {need} (CrackSet.events)")
     missing = [n for n in need if n not in b.dtype.names]
     if missing:
-        raise ValueError(f"breakages lack field(s) {missing}; need {need} (see fdem.cohesive.EVENT_DTYPE)")
+        raise ValueError(f"breakages lack field(s) {missing}; need {need} (see fdem.physics.cracks.EVENT_DTYPE)")
     if b.ndim != 1:
         raise ValueError(f"breakages must be 1-D, got shape {b.shape}")
     return b

@@ -1,16 +1,16 @@
 """What a slope run reports: ``summary.json``, time series, the event catalogue and pictures.
 
-:class:`RunReport` watches a running :class:`~fdem.solver.Simulation` through monitors (one
+:class:`RunReport` watches a running :class:`~fdem.solve.simulation.Simulation` through monitors (one
 value per history row: cracks broken by mode, fragments) and, at the end, writes
 
 * ``summary.json``: stages, factor of safety, runout distance and volume, displacement
   percentiles, peak and released kinetic energy, cracks by mode, fragments and their sizes,
   micro-seismic event statistics, the ledger error;
-* ``events.csv``: the micro-seismic catalogue (:func:`fdem.events.cluster_events`; a
+* ``events.csv``: the micro-seismic catalogue (:func:`fdem.results.events.cluster_events`; a
   "no events" line when nothing broke);
 * ``kinetic_energy.png``, ``cracks_by_mode.png``, ``magnitudes.png`` (when there are events),
   ``fragments.png`` and ``failure.png`` (displacement on the deformed mesh with the broken
-  crack elements by mode, :func:`fdem.pictures.failure_frame`).
+  crack elements by mode, :func:`fdem.io.pictures.failure_frame`).
 
 The definitions (runout distance as the 99th area percentile of the reach beyond the toe,
 fragments, events) are in ``docs/outputs.md``.
@@ -44,7 +44,7 @@ class RunReport:
     fragments_every : monitor the fragment count on every history row (connected components
         of the still-bonded triangles; about 50 ms at 1e5 triangles)
     reference_events : magnitude statistics of a reference catalogue to compare with
-        (e.g. :data:`fdem.events.MULIASHI` for that scene), or ``None``: no comparison
+        (e.g. :data:`fdem.results.events.MULIASHI` for that scene), or ``None``: no comparison
     """
 
     def __init__(self, sim: Simulation, toe_x: float, toward: float = -1.0, floor_y: float | None = None,

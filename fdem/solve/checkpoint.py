@@ -1,6 +1,6 @@
 """Checkpoint and restart, bit for bit.
 
-A checkpoint is everything :meth:`fdem.solver.Simulation.state_dict` returns: the state, the
+A checkpoint is everything :meth:`fdem.solve.simulation.Simulation.state_dict` returns: the state, the
 energy ledger, the history rows and each force provider's own ``state_dict()`` (crack elements:
 damage, status, offsets, events, active list, reduction factor; contact: broken faces, bonds,
 contactors, the pair list with its slip history). Restored into a freshly built simulation of
@@ -75,7 +75,7 @@ def _describe(fp: dict) -> str:
 
 # ----------------------------------------------------------------------------- in memory
 def snapshot(sim) -> dict:
-    """A deep copy of the simulation's state (:meth:`~fdem.solver.Simulation.state_dict`),
+    """A deep copy of the simulation's state (:meth:`~fdem.solve.simulation.Simulation.state_dict`),
     independent of the running simulation; :func:`restore` may apply it any number of times."""
     return copy.deepcopy(sim.state_dict())
 
@@ -165,7 +165,7 @@ def save_checkpoint(sim, path) -> Path:
 
 def read_checkpoint(path) -> dict:
     """The content of a checkpoint file: ``format_version``, ``mesh`` (fingerprint) and
-    ``state`` (a :meth:`~fdem.solver.Simulation.state_dict`). Missing, corrupt or foreign files
+    ``state`` (a :meth:`~fdem.solve.simulation.Simulation.state_dict`). Missing, corrupt or foreign files
     raise ``FileNotFoundError`` / ``ValueError`` naming the path."""
     path = Path(path)
     if not path.is_file():
@@ -204,7 +204,7 @@ def load_checkpoint(sim, path) -> None:
 
 # ----------------------------------------------------------------------------- in the run loop
 def periodic(path, every_steps: int) -> Callable:
-    """A ``stop_when`` callable for :meth:`~fdem.solver.Simulation.run` that writes a
+    """A ``stop_when`` callable for :meth:`~fdem.solve.simulation.Simulation.run` that writes a
     checkpoint to ``path`` at the first history row at or after every multiple of
     ``every_steps`` (simulation step count) and never stops the run.
 

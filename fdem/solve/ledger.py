@@ -10,7 +10,7 @@ the half-step bookkeeping of :mod:`fdem.kernels.stepping` the balance is exact f
 forces; what remains measures nonlinearity, round-off and provider errors."""
 from __future__ import annotations
 
-__all__ = ["EnergyLedger"]
+__all__ = ["EnergyLedger", "work_halves"]
 
 
 class EnergyLedger:
@@ -73,3 +73,13 @@ class EnergyLedger:
         row["balance_error_relative"] = row["balance_error"] / self.scale if self.scale > 0 else 0.0
         self.last = row
         return row
+
+
+def work_halves(sums) -> tuple[dict[str, float], dict[str, float]]:
+    """The early and late halves of one step's non-conservative work (from a
+    :class:`~fdem.kernels.stepping.StepSums`), keyed by the ledger's cumulative columns."""
+    early = {"damping_dissipation": sums.damping_early, "viscous_dissipation": sums.viscous_early,
+             "boundary_work": sums.reaction_early, "interaction_work": sums.interaction_early}
+    late = {"damping_dissipation": sums.damping_late, "viscous_dissipation": sums.viscous_late,
+            "boundary_work": sums.reaction_late, "interaction_work": sums.interaction_late}
+    return early, late

@@ -10,7 +10,7 @@ the reference coordinates ``lambda x, y: x < 1.0``, or an array of node ids.
 
 Two node layouts are supported:
 
-* **exploded** (the FDEM layout, :func:`fdem.topology.build_topology`): node ``3t + k`` is
+* **exploded** (the FDEM layout, :func:`fdem.mesh.topology.build_topology`): node ``3t + k`` is
   corner ``k`` of triangle ``t``; triangles are tied only by crack elements (providers). The
   solver uses the fused one-pass kernel.
 * **conforming** (:class:`ConformingTopology`): triangles share mesh nodes, a plain finite
@@ -99,7 +99,7 @@ class Model:
     Parameters
     ----------
     topology : Topology or ConformingTopology
-        Exploded mesh (:func:`fdem.topology.build_topology`) or conforming mesh.
+        Exploded mesh (:func:`fdem.mesh.topology.build_topology`) or conforming mesh.
     materials : ElasticMaterial or sequence of them
         Property sets; triangle ``t`` uses ``materials[triangle_property[t]]``.
     triangle_property : (n_tri,) int array, optional
@@ -182,7 +182,7 @@ class Model:
 
     def critical_viscosity(self) -> np.ndarray:
         """(n_tri,) viscosity [Pa s] that critically damps each triangle's highest mode,
-        see :func:`fdem.materials.critical_viscosity` (about ``(4/3) h sqrt(rho (lambda + mu))``,
+        see :func:`fdem.physics.stability.critical_viscosity` (about ``(4/3) h sqrt(rho (lambda + mu))``,
         ``h`` the smallest altitude)."""
         lam, mu = self.lame_arrays()
         return critical_viscosity(self.topology.x0, self.topology.triangles, lam, mu, self.property_array("density"))
@@ -394,7 +394,7 @@ class Model:
         return mass
 
     def triangle_critical_dt(self) -> np.ndarray:
-        """(n_tri,) exact critical step of each triangle [s], see :func:`fdem.materials.triangle_critical_dt`."""
+        """(n_tri,) exact critical step of each triangle [s], see :func:`fdem.physics.stability.triangle_critical_dt`."""
         lam, mu = self.lame_arrays()
         return triangle_critical_dt(self.topology.x0, self.topology.triangles, lam, mu,
                                     self.property_array("density"), self.viscosity_array())

@@ -1,4 +1,4 @@
-"""Time loop: stages, automatic stable time step, force providers, energy ledger, output, guard.
+"""The time loop (:class:`Simulation`): force providers, automatic stable time step, output frames, guard.
 
 One step (:meth:`Simulation.step`) reads like the algorithm:
 
@@ -7,8 +7,8 @@ One step (:meth:`Simulation.step`) reads like the algorithm:
    ``x_n``: ``provider.add_forces(x, v, f_interaction, dt, step)``;
 3. one fused kernel computes every triangle's internal force and advances its own nodes
    (central differences with gravity, external loads, supports, prescribed velocities,
-   damping): :func:`fdem.kernels.integration.step_exploded` (a conforming mesh takes the
-   two-pass :func:`~fdem.kernels.integration.triangle_pass` + :func:`~fdem.kernels.integration.node_pass`).
+   damping): :func:`fdem.kernels.stepping.step_exploded` (a conforming mesh takes the
+   two-pass :func:`~fdem.kernels.stepping.triangle_pass` + :func:`~fdem.kernels.stepping.node_pass`).
 
 Force providers
 ---------------
@@ -33,7 +33,7 @@ Every history row holds ``kinetic``, ``strain``, ``gravity_potential`` ``-sum m 
 ``interaction_work`` (work done on the body by the providers' forces, a cross-check),
 one column per provider energy term, ``total = kinetic + strain + potentials + provider
 terms + dissipations - boundary_work`` and ``balance_error = total - total at the first
-record``. With the half-step bookkeeping of :mod:`fdem.kernels.integration` the balance is
+record``. With the half-step bookkeeping of :mod:`fdem.kernels.stepping` the balance is
 exact for linear forces; what remains measures nonlinearity, round-off and provider errors.
 If a provider has no ``energy_terms``, its energy is taken as ``-interaction_work``.
 """
@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
 import numpy as np
-from fdem.kernels.stepping import (LEDGER_FIELDS, n_blocks, node_pass, step_exploded, step_exploded_elastic, triangle_pass, viscous_power)
+from fdem.kernels.stepping import (LEDGER_FIELDS, StepSums, n_blocks, node_pass, step_exploded, step_exploded_elastic, triangle_pass, viscous_power)
 from fdem.kernels.triangles import assemble_triangle_forces, triangle_stress_state
 from fdem.physics.elastic import PLANE_STRAIN
 from fdem.physics.stability import combine_stable_dt
@@ -56,7 +56,7 @@ from fdem.io import npz as npz
 from fdem.io import history as history_file
 from fdem.physics import elastic as elastic
 from fdem.solve.damping import Damping, NO_DAMPING
-from fdem.solve.ledger import EnergyLedger
+from fdem.solve.ledger import EnergyLedger, work_halves
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation"]
 
@@ -128,7 +128,7 @@ def provider_crack_fields(provider, n_cracks: int) -> dict[str, np.ndarray]:
 
 
 class Simulation:
-    """An explicit FDEM simulation of a :class:`~fdem.model.Model`, run in stages.
+    """An explicit FDEM simulation of a :class:`~fdem.solve.model.Model`, run in stages.
 
     Parameters
     ----------
@@ -148,11 +148,14 @@ class Simulation:
         Show a tqdm progress bar in :meth:`run`.
     pictures : bool
         Render a PNG with every output frame: displacement magnitude on the deformed mesh and
-        the broken crack elements by failure mode (:func:`fdem.pictures.failure_frame`).
+        the broken crack elements by failure mode (:func:`fdem.io.pictures.failure_frame`).
     providers : sequence of force providers (see the module docstring).
     output_fields : sequence of str, optional
         Point/cell arrays written to the triangle frames (default all: ``displacement``,
         ``velocity``, the stresses, ``property``, ``body``); fewer fields, smaller frames.
+    time_cap : float, optional
+        A cap [s] on the simulated time of every later :meth:`run` (a smoke run: a case's
+        ``--max-time``); a run asked to go beyond it stops at it, and :attr:`time_capped` says so.
     compression : ``None`` (raw, default: fastest to write), ``"zlib"`` or ``"lzma"``
         Block compression of every VTU frame (``docs/outputs.md``: zlib keeps 62 % of the bytes
         of a 180k-triangle frame at about 13 times the write time).
@@ -160,11 +163,12 @@ class Simulation:
 
     def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
-                 output_fields=None, compression: str | None = None):
+                 output_fields=None, compression: str | None = None, time_cap: float | None = None):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         self.model = model
         self.dt_fraction = dt_fraction
+        self.time_cap = time_cap
         self.user_dt = dt
         self.out_dir = Path(out_dir) if out_dir is not None else None
         self.name = name
@@ -287,9 +291,15 @@ class Simulation:
         self.ledger.gravity_moment0 = float((m * g_new * self.x0).sum())
         self.gravity = g_new
 
+    @property
+    def time_capped(self) -> bool:
+        """True when the run has reached its :attr:`time_cap`: a stage that ended there says
+        nothing about stability."""
+        return self.time_cap is not None and self.state.time >= self.time_cap - 0.5 * self.dt
+
     # ------------------------------------------------------------------ stepping
-    def step(self, damping: Damping = NO_DAMPING, ledger: bool = False) -> tuple:
-        """Advance one step; returns the kernel sums (see :data:`fdem.kernels.integration.LEDGER_FIELDS`).
+    def step(self, damping: Damping = NO_DAMPING, ledger: bool = False) -> StepSums:
+        """Advance one step; returns the kernel sums by name (:class:`fdem.kernels.stepping.StepSums`).
 
         With ``ledger=True`` the step also records a history row (energies at the state
         before the step, monitors after it) in :attr:`history` and ``history.csv``.
@@ -317,11 +327,14 @@ class Simulation:
             r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
                 x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
                 self.flags, self.v_prescribed, gx, gy, dt, self._partial)
-            sums = (0.0, kin, 0.0, 0.0, d_e, d_l, 0.0, 0.0, r_e, r_l, i_e, i_l, n_bad)
+            sums = StepSums(strain=0.0, kinetic=kin, gravity_moment=0.0, external_moment=0.0,
+                            damping_early=d_e, damping_late=d_l, viscous_early=0.0, viscous_late=0.0,
+                            reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
+                            n_inverted=n_bad)
         elif self.exploded:
-            sums = step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
-                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous, ledger,
-                                 self._partial)
+            sums = StepSums._make(step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
+                                                self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous,
+                                                ledger, self._partial))
         else:
             ptr, corners = self._csr
             strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
@@ -333,16 +346,19 @@ class Simulation:
             if self.use_viscous:
                 v_e = 0.5 * dt * rate
                 v_l = 0.5 * dt * viscous_power(v, self.triangles, self.tc, self._viscous_stress)
-            sums = (strain, kin, gm, em, d_e, d_l, v_e, v_l, r_e, r_l, i_e, i_l, n_bad)
+            sums = StepSums(strain=strain, kinetic=kin, gravity_moment=gm, external_moment=em,
+                            damping_early=d_e, damping_late=d_l, viscous_early=v_e, viscous_late=v_l,
+                            reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
+                            n_inverted=n_bad)
         step_before, time_before = st.step, st.time
         if self.exploded or ledger:  # the exploded kernels sum the kinetic energy every step
-            self.kinetic_peak = max(self.kinetic_peak, float(sums[1]))
+            self.kinetic_peak = max(self.kinetic_peak, float(sums.kinetic))
         st.step += 1
         st.time += dt
         if ledger:
             self.last_row = self._record(sums, step_before, time_before)
         else:
-            self.ledger.add_step(*self._halves(sums))
+            self.ledger.add_step(*work_halves(sums))
         return sums
 
     # ------------------------------------------------------------------ running
@@ -368,7 +384,7 @@ class Simulation:
             Steps between in-memory copies of the last good state (written on failure).
         stop_when : callable, optional
             ``stop_when(sim) -> bool`` checked on history steps; True ends the stage early. The
-            stage runner (:mod:`fdem.stages`) checks its end rules through it.
+            stage runner (:mod:`fdem.workflow.stages`) checks its end rules through it.
         progress : bool, optional
             Override the simulation's progress-bar setting for this call.
         final_output : bool
@@ -379,6 +395,11 @@ class Simulation:
         self.dt = self._choose_dt()
         if (n_steps is None) == (t_end is None):
             raise ValueError("run: give exactly one of n_steps and t_end")
+        if self.time_cap is not None:  # a smoke run: no stage goes beyond the cap
+            if t_end is not None:
+                t_end = min(t_end, self.time_cap)
+            else:
+                n_steps = min(n_steps, max(0, math.ceil((self.time_cap - self.state.time) / self.dt - 1e-9)))
         if n_steps is None:
             n_steps = max(0, int(math.ceil((t_end - self.state.time) / self.dt - 1e-9)))
         output_every = max(1, output_every or max(1, n_steps // 10))
@@ -426,16 +447,11 @@ class Simulation:
                 bar.close()
         return self
 
-    def _halves(self, sums) -> tuple[dict, dict]:
-        keys = ("damping_dissipation", "viscous_dissipation", "boundary_work", "interaction_work")
-        early = dict(zip(keys, (sums[4], sums[6], sums[8], sums[10])))
-        late = dict(zip(keys, (sums[5], sums[7], sums[9], sums[11])))
-        return early, late
-
     def _record(self, sums, step: int, time: float) -> dict:
-        early, late = self._halves(sums)
+        early, late = work_halves(sums)
         terms, complete = self._provider_terms if self.providers else ({}, True)
-        ledger = self.ledger.record(sums[1], sums[0], sums[2], sums[3], early, terms, complete)
+        ledger = self.ledger.record(sums.kinetic, sums.strain, sums.gravity_moment, sums.external_moment,
+                                    early, terms, complete)
         self.ledger.add_step(early, late)
         row = {"stage": self._stage, "step": int(step), "time": float(time), "dt": float(self.dt)}
         row.update(ledger)
@@ -464,10 +480,10 @@ class Simulation:
 
     # ------------------------------------------------------------------ guard
     def _check(self, sums, step: int, time: float, is_ledger: bool, energy_tolerance) -> None:
-        n_bad = sums[12]
+        n_bad = sums.n_inverted
         if n_bad > 0:
             self._fail(step, time, f"{n_bad} inverted or non-finite triangle(s)", None)
-        if is_ledger and not (math.isfinite(sums[0]) and math.isfinite(sums[1])):
+        if is_ledger and not (math.isfinite(sums.strain) and math.isfinite(sums.kinetic)):
             self._fail(step, time, "non-finite energy (NaN or infinity in the state)", None)
 
     def _fail(self, step: int, time: float, reason: str, triangle: int | None) -> None:
@@ -565,7 +581,7 @@ class Simulation:
 
     def crack_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:
         """Line-cell points (2 per crack element, midpoints of its coincident node pairs), mean
-        normal opening and slip [m] of every crack element (see :mod:`fdem.topology` for the order).
+        normal opening and slip [m] of every crack element (see :mod:`fdem.mesh.topology` for the order).
 
         The frame is the crack law's: the tangent of the mid-line ``t = (m1 - m0)/|m1 - m0|``
         with ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``. These are the geometric opening and slip
@@ -626,7 +642,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
-        """Everything a restart needs, copied (:mod:`fdem.checkpoint` saves it to disk).
+        """Everything a restart needs, copied (:mod:`fdem.solve.checkpoint` saves it to disk).
 
         The state (``x``, ``v``, ``time``, ``step``; the masses are derived), support flags,
         prescribed velocities, gravity, the last interaction forces, the energy ledger, the

@@ -2,9 +2,9 @@
 probability of failure, over the joint networks and strengths consistent with the field data.
 
 An :class:`Ensemble` names a *scene* (a picklable callable, ``scene(**parameters)``, that
-meshes a slope and brings it to equilibrium with :func:`fdem.geostatic.geostatic_start`,
-returning the :class:`fdem.solver.Simulation` or an object with a ``sim`` attribute) and the
-:class:`Distribution` of each uncertain parameter (a :class:`fdem.geometry.StochasticSet`
+meshes a slope and brings it to equilibrium with :func:`fdem.solve.geostatic.geostatic_start`,
+returning the :class:`fdem.solve.simulation.Simulation` or an object with a ``sim`` attribute) and the
+:class:`Distribution` of each uncertain parameter (a :class:`fdem.geometry.joint_sets.StochasticSet`
 seed, a trace length, an orientation scatter, a joint cohesion or friction angle, a
 heterogeneity seed...). :meth:`Ensemble.sample` draws ``n`` parameter sets reproducibly from
 ``seed``:
@@ -20,8 +20,8 @@ Seed parameters (:meth:`Distribution.seed`) are integers in ``[0, 2**31)`` from
 no dimension of the hypercube.
 
 :func:`run_ensemble` runs each realization as one Dask task (:func:`realize`: build the scene,
-then :func:`fdem.stages.factor_of_safety`; optionally :func:`fdem.workflow.run_slope_workflow`
-and :func:`fdem.analysis.runout`) on a local ``dask.distributed`` cluster of single-threaded
+then :func:`fdem.workflow.fos.factor_of_safety`; optionally :func:`fdem.workflow.slope.run_slope_workflow`
+and :func:`fdem.results.analysis.runout`) on a local ``dask.distributed`` cluster of single-threaded
 worker processes (``NUMBA_NUM_THREADS=1`` in each worker's environment, set before Numba is
 imported) or on a scheduler the user names. Rows stream into ``<out>/realizations.csv`` as
 tasks finish (``as_completed``): the sampled parameters (``p_<name>``), the FoS and its
@@ -72,7 +72,7 @@ class Distribution:
       ``[low, high]`` when bounds are given (``scipy.stats.truncnorm``: a parameter that must
       stay positive gets ``low=0``); ``sd > 0``;
     * :meth:`lognormal` ``(mean, sd)``: the variable's own mean and standard deviation (as in
-      :class:`fdem.geometry.StochasticSet`): ``ln X ~ N(mu, s^2)``,
+      :class:`fdem.geometry.joint_sets.StochasticSet`): ``ln X ~ N(mu, s^2)``,
       ``s^2 = ln(1 + (sd/mean)^2)``, ``mu = ln(mean) - s^2/2``; ``mean > 0``, ``sd > 0``;
     * :meth:`seed` ``()``: an integer seed in ``[0, 2**31)`` (a DFN or heterogeneity seed).
 
@@ -192,12 +192,12 @@ class Ensemble:
     n : number of realizations
     seed : seed of the sampling (and of the seed parameters)
     method : ``"lhs"`` (Latin hypercube) or ``"mc"`` (Monte Carlo)
-    fos : ``(lower, upper, tol)`` of :func:`fdem.stages.factor_of_safety` (``lower`` must be
+    fos : ``(lower, upper, tol)`` of :func:`fdem.workflow.fos.factor_of_safety` (``lower`` must be
         stable, ``upper`` failing; a realization outside the bracket is recorded as
         ``below_bracket`` or ``above_bracket``)
-    runout : a :class:`fdem.workflow.SlopeWorkflow` to run after the FoS search (reduction to
+    runout : a :class:`fdem.workflow.slope.SlopeWorkflow` to run after the FoS search (reduction to
         failure, runout to rest), or ``None``
-    toe_x : toe abscissa [m] for :func:`fdem.analysis.runout` (default: the scene's ``toe_x``)
+    toe_x : toe abscissa [m] for :func:`fdem.results.analysis.runout` (default: the scene's ``toe_x``)
     pictures : return the failure picture of each realization (``fos_failure.png``)
     max_time : cap [s] on each trial's simulated time, or ``None`` (the trial's own cap, 5 T).
         A smoke setting: a capped trial counts as failing, so realizations end

@@ -2,7 +2,14 @@
 
 :func:`factor_of_safety` brackets the smallest reduction factor ``F`` (or gravity factor) at
 which the slope fails, running one trial stage per factor from the same saved state
-(optionally in a process pool); it returns a :class:`FoSResult`."""
+(optionally in a process pool); it returns a :class:`FoSResult`.
+
+Factor of safety (:func:`factor_of_safety`): from a state in equilibrium, each trial sets a
+factor ``F`` of a trigger (strength reduction: ``c / F``, ``tan(phi) / F`` everywhere, see
+:mod:`fdem.physics.interfaces`), restarts from the saved state and runs a damped stage. The slope is
+*stable* at ``F`` if that stage converges, *failing* if the failure rule fires or the stage
+does not converge within its cap (non-convergence, as in the strength-reduction practice of
+Dawson, Roth & Drescher 1999). Bisection narrows ``[stable, failing]`` to the tolerance."""
 from __future__ import annotations
 
 import dataclasses
@@ -30,7 +37,7 @@ def _interfaces(sim):
 # ----------------------------------------------------------------------------- factor of safety
 class StrengthReduction:
     """Trigger of the factor-of-safety search: the strength-reduction factor ``F``
-    (:meth:`fdem.interfaces.Interfaces.set_reduction`); larger ``F`` is weaker."""
+    (:meth:`fdem.physics.interfaces.Interfaces.set_reduction`); larger ``F`` is weaker."""
 
     name = "strength reduction"
 
@@ -48,7 +55,7 @@ class GravityIncrease:
     """Trigger of the factor-of-safety search: gravity multiplied by the factor ``k`` (larger
     is heavier), from the model's gravity, as the Muliashi study raises the density ten-fold
     (``shared/cases.md`` B). The critical gravity factor is the factor of safety against
-    self-weight. :meth:`fdem.solver.Simulation.set_gravity` books each change in the ledger."""
+    self-weight. :meth:`fdem.solve.simulation.Simulation.set_gravity` books each change in the ledger."""
 
     name = "gravity increase"
 
@@ -181,7 +188,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
-    trial restarts from it (:func:`fdem.checkpoint.snapshot`) with the trigger set to the trial
+    trial restarts from it (:func:`fdem.solve.checkpoint.snapshot`) with the trigger set to the trial
     factor and runs ``trial`` (default :func:`default_trial_stage`). ``lower`` must be stable
     and ``upper`` failing, else a ``ValueError`` names the trial that contradicts the bracket.
     The search stops when the bracket is narrower than ``tol``. On return ``sim`` is back in
@@ -195,7 +202,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     ``w + 1`` equal parts, so a round narrows it ``w + 1``-fold instead of 2-fold. Each worker
     builds the scene with ``build(*build_args)`` (a picklable, module-level function returning
     a simulation of the same mesh and providers as ``sim``) and restarts its trials from a
-    checkpoint of ``sim`` (:func:`fdem.checkpoint.save_checkpoint`; in ``out_dir`` when given).
+    checkpoint of ``sim`` (:func:`fdem.solve.checkpoint.save_checkpoint`; in ``out_dir`` when given).
     """
     from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
 

@@ -1,13 +1,13 @@
 """The slope workflow: equilibrium, factor of safety, strength reduction to failure, runout to rest.
 
-Composed of :mod:`fdem.stages` so that a case script only builds the model and calls
+Composed of :mod:`fdem.workflow.stages` so that a case script only builds the model and calls
 :func:`run_slope_workflow`:
 
 1. **Equilibrium check** at ``F = 1`` (the model must come from a geostatic start,
-   :func:`fdem.geostatic.geostatic_start`): a damped stage that must converge; a slope that
+   :func:`fdem.solve.geostatic.geostatic_start`): a damped stage that must converge; a slope that
    does not stand at ``F = 1`` is reported, not hidden. Damped stages use
-   :func:`fdem.stages.fundamental_damping` (mass-proportional, critical for the fundamental mode).
-2. **Factor of safety** (optional): :func:`fdem.stages.factor_of_safety` from that state.
+   :func:`fdem.workflow.fos.fundamental_damping` (mass-proportional, critical for the fundamental mode).
+2. **Factor of safety** (optional): :func:`fdem.workflow.fos.factor_of_safety` from that state.
 3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
    damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
    the strength falls by 10 % of its initial value per 10,000 steps of 2 us, i.e. ``1/F``
@@ -15,7 +15,7 @@ Composed of :mod:`fdem.stages` so that a case script only builds the model and c
 4. **Runout** at the factor where the slope failed: dynamic (no quasi-static damping), until
    the kinetic energy falls below a fraction of its peak and stays there for one response
    time, capped in simulated time. With ``out_dir`` the state it starts from is saved to
-   ``runout_start.npz`` (:func:`fdem.checkpoint.load_checkpoint` restarts from it).
+   ``runout_start.npz`` (:func:`fdem.solve.checkpoint.load_checkpoint` restarts from it).
 
 Every stage's result (why it ended, when, how many steps) goes into the returned summary.
 """
@@ -45,7 +45,7 @@ def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[flo
 @dataclass
 class SlopeWorkflow:
     """Settings of :func:`run_slope_workflow` (times in simulated seconds; ``None``: from the
-    model's response time ``T``, :func:`fdem.stages.response_time`).
+    model's response time ``T``, :func:`fdem.workflow.stages.response_time`).
 
     reduction : ``"steps"`` (damped equilibrium at each factor; default) or ``"rate"``
     factors : the factors ``F`` of the steps (default :func:`reduction_steps`: 1/0.9 ... 1/0.3)
@@ -93,9 +93,10 @@ class SlopeWorkflow:
 
 
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
-    """Run the slope workflow (module docstring) on ``sim``; returns a summary dict with every
-    stage's result, the factor of safety when searched, the factor at failure and the state
-    the run ended in (``stable`` or ``failed``)."""
+    """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
+    values: every stage's result, the factor of safety when searched (``FoSResult.as_dict()``),
+    the factor at failure and the state the run ended in (``stable``, ``failed``,
+    ``time_capped`` or ``interrupted``)."""
     wf = workflow or SlopeWorkflow()
     cracks = sim.cracks
     if cracks is None:
@@ -124,19 +125,12 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     return summary
 
 
-def _time_cap_reached(sim) -> bool:
-    """True when a cap on the whole run's simulated time (``sim.time_cap``, set by a case's
-    ``--max-time``) has been reached: a stage that ended there says nothing about stability."""
-    cap = getattr(sim, "time_cap", None)
-    return cap is not None and sim.state.time >= cap - 0.5 * sim.dt
-
-
 def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir) -> None:
     cracks.hold_elastic(False)
     eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
                                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
     summary["equilibrium"] = eq.reason
-    if eq.reason != "converged" and _time_cap_reached(sim):
+    if eq.reason != "converged" and sim.time_capped:
         summary["outcome"] = "time_capped"
         return
     if eq.reason != "converged":
@@ -147,14 +141,13 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             lower, upper, tol = wf.fos
             fos = factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir)
             summary["fos"] = fos.as_dict()
-            summary["_fos_result"] = fos
         if wf.reduction == "steps":
             for F in wf.factors:
                 r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
                                                 damping=damped, fail=fail,
                                                 converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio))))
                 if r.reason != "converged":
-                    if _time_cap_reached(sim):
+                    if sim.time_capped:
                         summary["outcome"] = "time_capped"
                         return
                     summary["failed_at_factor"] = F

@@ -1,4 +1,6 @@
-"""Stages with physical end rules, strength-reduction schedules and the factor-of-safety search.
+"""Stages with physical end rules: :class:`Stage`, :func:`run_stage` and why a stage ended.
+
+The factor-of-safety search and its triggers are :mod:`fdem.workflow.fos`.
 
 A stage is a stretch of simulated time with its own damping, strength-reduction factor and
 end rule. It ends by physics, never by a bare step count (the step count that means "settled"
@@ -6,7 +8,7 @@ changes with the mesh and the penalties):
 
 * ``duration``: a fixed length of simulated time [s] (a dynamic runout window, a ramp);
 * ``converge``: equilibrium reached — the unbalanced-force ratio
-  (:func:`fdem.geostatic.unbalanced_force_ratio`), the kinetic energy relative to the stage's
+  (:func:`fdem.solve.geostatic.unbalanced_force_ratio`), the kinetic energy relative to the stage's
   peak, and/or the largest monitored speed fall below their limits;
 * ``fail``: an objective failure criterion fires — a monitored node moves more than a set
   displacement since the stage began, or keeps a speed above a limit;
@@ -20,13 +22,6 @@ slope of height ``H`` (shear beam on a rigid base) is ``T = 4 H / c_s`` with
 ``c_s = sqrt(mu / rho)`` (Kramer 1996, *Geotechnical Earthquake Engineering*, sec. 7.2); a
 15-30 m slope rings for about 0.3 s. Checks run every ``T / 40``; a stage with rules is
 capped at ``10 T`` by default, a factor-of-safety trial at ``5 T`` (:func:`default_trial_stage`).
-
-Factor of safety (:func:`factor_of_safety`): from a state in equilibrium, each trial sets a
-factor ``F`` of a trigger (strength reduction: ``c / F``, ``tan(phi) / F`` everywhere, see
-:mod:`fdem.interfaces`), restarts from the saved state and runs a damped stage. The slope is
-*stable* at ``F`` if that stage converges, *failing* if the failure rule fires or the stage
-does not converge within its cap (non-convergence, as in the strength-reduction practice of
-Dawson, Roth & Drescher 1999). Bisection narrows ``[stable, failing]`` to the tolerance.
 """
 from __future__ import annotations
 
@@ -50,7 +45,7 @@ def _positive_or_none(value, name: str) -> None:
 class Convergence:
     """Equilibrium rule: the stage has converged when every given limit holds at a check.
 
-    unbalanced_ratio : limit on :func:`fdem.geostatic.unbalanced_force_ratio`
+    unbalanced_ratio : limit on :func:`fdem.solve.geostatic.unbalanced_force_ratio`
         ``sum |f_net| / sum |m g|`` over free components [-] (default 1e-4)
     kinetic_ratio : limit on the kinetic energy over the stage's peak kinetic energy [-]
     speed : limit on the largest monitored speed [m/s]
@@ -102,14 +97,14 @@ class Stage:
     duration : fixed simulated time [s]; the stage then ends ``completed`` (rules may end it earlier)
     max_time : cap [s] of a stage with rules (default ``10 T``, :func:`response_time`)
     converge, fail : the end rules (:class:`Convergence`, :class:`Failure`)
-    damping : :class:`fdem.solver.Damping` of the stage (default none: dynamic)
+    damping : :class:`fdem.solve.damping.Damping` of the stage (default none: dynamic)
     reduction : strength-reduction factor ``F`` set when the stage starts (``None``: keep)
     reduction_ramp : ``(F_end, seconds)``: the strength ``1/F`` moves linearly from its value
         at the stage start to ``1/F_end`` over ``seconds`` of simulated time, updated at every
         check (the four-slope paper's schedule, 10 % of the initial strength per 10,000 steps
         of 2 us, is ``1/F`` falling by 5 per second)
     gravity_factor : gravity set to this multiple of ``base_gravity`` when the stage starts
-        (``None``: keep); :meth:`fdem.solver.Simulation.set_gravity` books the change
+        (``None``: keep); :meth:`fdem.solve.simulation.Simulation.set_gravity` books the change
     base_gravity : (gx, gy) [m/s^2] the factor multiplies (default: the model's gravity)
     hold_elastic : hold the crack elements elastic during the stage (``None``: keep)
     check_interval : simulated time [s] between checks of the rules (default ``T / 40``)
@@ -156,7 +151,7 @@ class Stage:
             _positive_or_none(f_end, f"stage {self.name!r}: reduction_ramp end factor")
             _positive_or_none(seconds, f"stage {self.name!r}: reduction_ramp time")
         if not isinstance(self.damping, Damping):
-            raise ValueError(f"stage {self.name!r}: damping must be a fdem.solver.Damping, got {self.damping!r}")
+            raise ValueError(f"stage {self.name!r}: damping must be a fdem.solve.damping.Damping, got {self.damping!r}")
 
 
 @dataclass
@@ -223,7 +218,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     The stage's factor, hold and damping are set first. Rules are checked every
     ``check_interval`` of simulated time (a history row of the ledger is written at each
     check); the run stops at the first rule that holds. A run that goes unstable raises
-    :class:`fdem.solver.InstabilityError` with its last good state on disk, as every run does.
+    :class:`fdem.solve.simulation.InstabilityError` with its last good state on disk, as every run does.
     """
     from fdem.solve.geostatic import unbalanced_force_ratio
 
