@@ -5,7 +5,7 @@ Each edge of the overlap is the part of one triangle's edge inside the other, fo
 separating-axis values, so no polygon is built; rare collinear edges fall back to clipping.
 It measured 5 % faster than clipping on a compressed block and 10-15 % slower on a settled pile
 (docs/benchmarks.md), so the pair loop clips; this independent evaluation checks it
-(tests/test_contact_kernel.py).
+(tests/unit/test_contact_kernel.py).
 """
 from __future__ import annotations
 

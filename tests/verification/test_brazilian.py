@@ -1,19 +1,14 @@
 """Brazilian disc (verification.md): the peak platen load recovers the crack elements' tensile
 strength within 15 % when the disc is large against the process zone, and the first crack opens
 near the centre on the loaded diameter."""
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-CASE = Path(__file__).resolve().parents[1] / "cases" / "brazilian_disc.py"
+from conftest import load_case
 
 
 @pytest.fixture(scope="module")
 def brazilian():
-    spec = importlib.util.spec_from_file_location("brazilian_disc", CASE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_case("brazilian_disc")
     # The elastic formula holds for a brittle disc, D >> l_pz = E G_I / f_t^2: D = 50 l_pz here
     # (G_I = 5 J/m^2). At the case's G_I = 20 (D = 12.5 l_pz) the size effect alone puts the model's
     # strength at 1.15 f_t, the mean over load directions, converged in h (docs/pareto.md).

@@ -6,15 +6,12 @@ from __future__ import annotations
 import csv
 import math
 import os
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
 
 from fdem.io.ensemble_table import TABLE, read_table
 from fdem.workflow.ensembles import Distribution, Ensemble, local_cluster, run_ensemble

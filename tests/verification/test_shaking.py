@@ -2,9 +2,7 @@
 baseline correction), Newmark's rigid block against its closed form, plane P and S pulses
 leaving through Lysmer-Kuhlemeyer dashpots, the energy ledger through shaking, and the FDEM
 block on an incline against Newmark (verification.md)."""
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +18,9 @@ from fdem.reference.newmark import (newmark_displacement, newmark_response, rect
 from fdem.solve.simulation import Simulation
 from fdem.mesh.topology import build_topology
 
+from conftest import load_case
+
 E, NU, RHO = 1e9, 0.25, 2700.0
-CASE = Path(__file__).resolve().parents[1] / "cases" / "newmark_block.py"
 
 
 # ----------------------------------------------------------------------------- histories
@@ -204,9 +203,7 @@ def test_ledger_closes_through_base_shaking_with_quiet_sides():
 
 # ----------------------------------------------------------------------------- FDEM against Newmark
 def test_block_on_shaken_incline_slips_as_newmark():
-    spec = importlib.util.spec_from_file_location("newmark_block", CASE)
-    case = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(case)
+    case = load_case("newmark_block")
     r = case.run(size=0.5, t_after=0.2, n_samples=20)
     assert r["newmark_m"] > 0.1
     assert r["slip_m"] == pytest.approx(r["newmark_m"], rel=0.05)   # measured +0.3 %

@@ -1,15 +1,11 @@
 """Block on an inclined plane through the full solver (crack elements + contact + triangles):
 sliding distance against s = g t^2 (sin theta - mu cos theta) / 2, sticking, and the
 Goodman-Bray toppling criterion b/h < tan(theta) (verification.md)."""
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-CASE = Path(__file__).resolve().parents[1] / "cases" / "block_on_incline.py"
-spec = importlib.util.spec_from_file_location("block_on_incline", CASE)
-incline = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(incline)
+from conftest import load_case
+
+incline = load_case("block_on_incline")
 
 
 @pytest.mark.parametrize("theta, phi", [(30.0, 20.0), (40.0, 25.0)])

@@ -5,26 +5,17 @@ a joint that daylights in the face, static geostatic start.
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from fdem.cases.planar_failure import planar_slope_geometry
 from fdem.solve.damping import Damping, NO_DAMPING
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import fundamental_damping
 from fdem.workflow.slope import SlopeWorkflow, reduction_steps, run_slope_workflow
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
-import planar_failure as pf  # noqa: E402
+from conftest import PLANAR_SIZE, planar_slope_scene
 
-SIZE = 1.6
-
-
-def scene(geometry="no_crack"):
-    return pf.planar_failure_simulation(planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES[geometry]), SIZE)
+import planar_failure as pf  # cases/planar_failure.py (tests/conftest.py puts cases/ on sys.path)
 
 
 def test_stage_rules_are_checked_before_anything_runs():
@@ -42,7 +33,7 @@ def test_stage_rules_are_checked_before_anything_runs():
 
 
 def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
-    s = scene()
+    s = planar_slope_scene()
     crit, _ = s.sim.critical_dt()
     T = response_time(s.sim.model)
     r = run_stage(s.sim, Stage("fine", duration=0.05 * T, dt_fraction=0.4, damping=fundamental_damping(s.sim)),
@@ -73,7 +64,7 @@ def test_static_start_converges_and_a_weak_slope_fails():
     """From the static start the slope settles within the cap (a few joint elements at the
     daylight point are above their strength at F = 1 and slide a little); far below its
     strength the block slides and the failure rule fires."""
-    s = scene()
+    s = planar_slope_scene()
     sim = s.sim
     T = response_time(sim.model)
     r = run_stage(sim, Stage("equilibrium", max_time=10 * T, converge=Convergence(unbalanced_ratio=1e-4),
@@ -98,7 +89,7 @@ def test_ledger_closes_through_a_reduction_schedule_with_breakage_and_contact():
     """Damped reduction steps until the block fails, then an undamped runout: elements soften,
     break and slide while the factor keeps changing, contact takes the broken faces; the ledger
     stays closed to 1 % of the energy scale."""
-    s = scene("tension_crack")   # the crack breaks open when the block moves
+    s = planar_slope_scene("tension_crack")   # the crack breaks open when the block moves
     sim = s.sim
     T = response_time(sim.model)
     wf = SlopeWorkflow(factors=(1.2, 1.6, 2.2, 3.0), step_time=8 * T, fail_displacement=0.02,
@@ -121,7 +112,7 @@ def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor()
     10 %, and the ledger must stay closed while gravity changes under a moving slope."""
     from fdem.workflow.fos import GravityIncrease, factor_of_safety
 
-    s = scene()
+    s = planar_slope_scene()
     sim = s.sim
     le = pf.analytic(**pf.GEOMETRIES["no_crack"])
     psi, phi = np.radians(35.0), np.radians(pf.JOINT_FRICTION)
@@ -142,8 +133,7 @@ def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor()
 
 def planar_simulation(geometry: str, size: float):
     """Module-level scene builder: worker processes of the parallel search call it."""
-    return scene(geometry).sim if size == SIZE else pf.planar_failure_simulation(
-        planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES[geometry]), size).sim
+    return planar_slope_scene(geometry, size).sim
 
 
 def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibrium(tmp_path):
@@ -152,10 +142,10 @@ def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibr
     Hoek and Bray's, like the serial search."""
     from fdem.workflow.fos import factor_of_safety
 
-    sim = scene().sim
+    sim = planar_slope_scene().sim
     le = pf.analytic(**pf.GEOMETRIES["no_crack"])
     result = factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.05, workers=2, build=planar_simulation,
-                              build_args=("no_crack", SIZE), out_dir=tmp_path)
+                              build_args=("no_crack", PLANAR_SIZE), out_dir=tmp_path)
     assert result.bracket[1] - result.bracket[0] <= 0.05
     assert result.fos == pytest.approx(le.fos, rel=0.10), (result.fos, le.fos)
     assert len(result.trials) == 2 + 2 * 3          # the ends, then three rounds of two

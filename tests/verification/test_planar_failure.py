@@ -158,16 +158,10 @@ def test_joint_daylights_in_the_face_and_reaches_the_surface_or_the_crack(crack)
 
 
 def _case():
-    import importlib.util
-    import sys
-    from pathlib import Path
+    from conftest import load_case
 
-    path = Path(__file__).resolve().parents[1] / "cases" / "planar_failure.py"
-    spec = importlib.util.spec_from_file_location("planar_failure_case", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module        # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    # registered in sys.modules: its dataclasses look their module up there
+    return load_case("planar_failure", "planar_failure_case", register=True)
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import numpy as np
 
 from fdem.kernels import contact_pairs as kc
 
-import contact_oracle  # noqa: E402  (tests/contact_oracle.py)
+import contact_oracle  # tests/unit/contact_oracle.py, next to this file
 from fdem.mesh.mesh import structured_rectangle
 from fdem.mesh.topology import build_topology
 

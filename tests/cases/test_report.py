@@ -3,19 +3,15 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from fdem.geometry.polygons import slope_toe
 from fdem.results.report import RunReport
-from fdem.cases.planar_failure import planar_slope_geometry
 from fdem.workflow.stages import response_time
 from fdem.workflow.slope import SlopeWorkflow, run_slope_workflow
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cases"))
-import planar_failure as pf  # noqa: E402
+from conftest import planar_slope, planar_slope_scene
 
 
 def _finite(obj) -> bool:
@@ -29,8 +25,8 @@ def _finite(obj) -> bool:
 
 
 def test_run_report_after_failure_and_runout(tmp_path):
-    g = planar_slope_geometry(pf.HEIGHT, **pf.GEOMETRIES["tension_crack"])
-    s = pf.planar_failure_simulation(g, 1.6, out_dir=tmp_path, pictures=False)
+    g = planar_slope("tension_crack")
+    s = planar_slope_scene("tension_crack", 1.6, out_dir=tmp_path, pictures=False)
     sim = s.sim
     toe_x, _ = slope_toe(g.bodies[0])
     report = RunReport(sim, toe_x=toe_x)

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import ROOT
+
 SCRIPTS = sorted(p for p in (ROOT / "cases").glob("*.py") if not p.name.startswith("_"))
 
 SMOKE = "--max-time"

@@ -2,7 +2,6 @@
 import re
 import warnings
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +15,9 @@ from fdem.mesh.quality import quality_report
 from fdem.mesh.topology import build_topology
 from fdem.mesh.triangles import check_triangles
 
-MESHES = Path(__file__).resolve().parents[1] / "meshes"
+from conftest import ROOT
+
+MESHES = ROOT / "meshes"
 
 
 def small_slope_model():

@@ -1,11 +1,10 @@
 """Element damping (docs/damping.md): the critical viscosity of a constant-strain triangle's
 highest mode, what it does to the stable step and the energy ledger, and the block on an
 incline with the default damping against the rigid-block answer."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
+
+from conftest import load_case
 
 from fdem.physics.elastic import ElasticMaterial, elasticity_matrix, plane_lame_constants
 from fdem.physics.stability import critical_viscosity, critical_viscosity_equilateral, triangle_critical_dt
@@ -15,10 +14,7 @@ from fdem.solve.model import DEFAULT_ELEMENT_DAMPING, Model
 from fdem.mesh.topology import ConformingTopology
 from fdem.solve.simulation import Simulation
 
-CASE = Path(__file__).resolve().parents[1] / "cases" / "block_on_incline.py"
-spec = importlib.util.spec_from_file_location("block_on_incline", CASE)
-incline = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(incline)
+incline = load_case("block_on_incline")
 
 RHO = 2700.0
 EQUILATERAL = np.array([[0.0, 0.0], [2.0 / np.sqrt(3.0), 0.0], [1.0 / np.sqrt(3.0), 1.0]])  # altitude 1 m

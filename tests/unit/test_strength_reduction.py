@@ -3,7 +3,7 @@
 A change of the reduction factor F (or holding elements elastic and releasing them) on damaged
 elements must neither create nor remove stored energy; what it makes fail is booked as
 dissipation at fixed positions. Element-level facts here; the ledger of a whole reduction
-schedule on a slope is in tests/test_stages.py.
+schedule on a slope is in tests/verification/test_stages.py.
 """
 from __future__ import annotations
 
