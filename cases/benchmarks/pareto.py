@@ -275,7 +275,7 @@ def incline(size: float, alpha: float, safety: float, theta: float = 30.0, phi: 
 
 # ============================================================================ 6. two-body impact
 def impact(size: float, alpha: float, safety: float) -> dict:
-    """Frictionless impact of two elastic blocks (``tests/test_impact.py``): largest total-energy
+    """Frictionless impact of two elastic blocks (``tests/verification/test_impact.py``): largest total-energy
     error over the contact, relative to the initial energy."""
     t0 = time.perf_counter()
     E, NU, RHO = 1e9, 0.25, 2500.0

@@ -63,8 +63,8 @@ Evaluation (all integrals exact)
    carries a *label*, the triangle edge it lies on (``c``'s edge ``m`` or ``t``'s edge ``j``).
    An evaluation of the same law from the overlap's edges, without the polygon, was 5 % faster
    on a compressed block but 10-15 % slower on the slivers of a settled pile
-   (``docs/benchmarks.md``); it lives in ``tests/contact_oracle.py`` as an independent check of
-   the clipping (``tests/test_contact_kernel.py``).
+   (``docs/benchmarks.md``); it lives in ``tests/unit/contact_oracle.py`` as an independent check of
+   the clipping (``tests/unit/test_contact_kernel.py``).
 3. Area terms by parts. ``grad phi_q = 3 b_k`` on ``S_k``, ``grad lambda_i = b_i``, so
    ``3 sum_k b_k int_{D cap S_k} lambda_i dA = int_D grad(phi_q) lambda_i dA
    = oint_dD phi_q lambda_i n dGamma - b_i int_D phi_q dA``, and ``phi_q = 0`` on ``q``'s own

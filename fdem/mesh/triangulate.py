@@ -67,10 +67,10 @@ def _classify_boundary(pieces: np.ndarray, bounds, tol: float) -> list[str]:
     return names
 
 
-def mesh_geometry(model: Geometry, size: float, refine_near_joints: float | None = None,
+def mesh_geometry(geometry: Geometry, size: float, refine_near_joints: float | None = None,
                refine_distance: float | None = None, algorithm: str = "delaunay",
                min_angle_warning: float = 10.0, verbose: bool = False) -> Mesh:
-    """Triangulate ``model`` with Gmsh at target element ``size`` [m], conforming to every joint.
+    """Triangulate ``geometry`` with Gmsh at target element ``size`` [m], conforming to every joint.
 
     Parameters
     ----------
@@ -91,10 +91,10 @@ def mesh_geometry(model: Geometry, size: float, refine_near_joints: float | None
         raise ValueError(f"refine_near_joints must be in (0, 1], got {refine_near_joints}")
     if algorithm not in ALGORITHMS:
         raise ValueError(f"unknown meshing algorithm {algorithm!r}; choose from {sorted(ALGORITHMS)}")
-    if size > 0.5 * model.size:
-        raise ValueError(f"mesh size {size} m is larger than half the model size {model.size:.3g} m")
-    dfn = model.dfn()
-    tol = max(model.tolerance * 1e3, 1e-12)  # vertex-merging tolerance: 1e-6 of the model size
+    if size > 0.5 * geometry.size:
+        raise ValueError(f"mesh size {size} m is larger than half the geometry size {geometry.size:.3g} m")
+    dfn = geometry.dfn()
+    tol = max(geometry.tolerance * 1e3, 1e-12)  # vertex-merging tolerance: 1e-6 of the geometry size
 
     import gmsh
 
@@ -110,7 +110,7 @@ def mesh_geometry(model: Geometry, size: float, refine_near_joints: float | None
         group_curves: dict[str, list[int]] = {}
         surfaces = []
         joint_curve_all = []
-        for b, body in enumerate(model.bodies):
+        for b, body in enumerate(geometry.bodies):
             mine = dfn.body == b
             segs, sets = dfn.segments[mine], dfn.set_id[mine]
             ends = segs.reshape(-1, 2)
@@ -121,7 +121,7 @@ def mesh_geometry(model: Geometry, size: float, refine_near_joints: float | None
             b_idx = index[: 2 * nb].reshape(-1, 2)
             j_idx = index[2 * nb:].reshape(-1, 2)
             loop = [geo.addLine(point_tags[i], point_tags[j]) for i, j in b_idx]
-            for tag, name in zip(loop, _classify_boundary(boundary, model.bounds, tol)):
+            for tag, name in zip(loop, _classify_boundary(boundary, geometry.bounds, tol)):
                 group_curves.setdefault(name, []).append(tag)
             surf = geo.addPlaneSurface([geo.addCurveLoop(loop)])
             surfaces.append(surf)

@@ -29,10 +29,9 @@ from fdem.mesh.mesh import Mesh
 from fdem.kernels.triangles import triangle_constants
 from fdem.mesh.topology import ConformingTopology
 
-__all__ = ["Selection", "FIX_X", "FIX_Y", "DEFAULT_ELEMENT_DAMPING", "geostatic_stress", "Model"]
+__all__ = ["FIX_X", "FIX_Y", "DEFAULT_ELEMENT_DAMPING", "geostatic_stress", "Model"]
 
 
-Selection = "str | Callable[[np.ndarray, np.ndarray], np.ndarray] | np.ndarray"
 
 
 FIX_X = 1

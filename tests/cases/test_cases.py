@@ -215,28 +215,27 @@ def test_fdem_run_passes_options_to_the_case(tmp_path, monkeypatch):
     assert seen == [["--out", str(tmp_path), "--size", "1.5"], ["--out", str(tmp_path)], ["--no-pictures"]]
 
 
-def test_cap_simulated_time_stops_runs_at_the_cap():
+def test_time_cap_stops_every_run_at_the_cap():
+    """A case's --max-time sets Simulation.time_cap: run(t_end) and run(n_steps) both stop at
+    the cap (within one step), and time_capped says so; no cap, no stop."""
     from fdem.cases.common import cap_simulated_time, time_capped
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
 
-    class Sim:  # the two things the cap touches: run(n_steps | t_end) and the state's time
-        dt = 0.1
-
-        def __init__(self):
-            self.state = type("S", (), {"time": 0.0})()
-
-        def run(self, n_steps=None, t_end=None, **kw):
-            if t_end is not None:
-                n_steps = max(0, math.ceil((t_end - self.state.time) / self.dt - 1e-9))
-            self.state.time += n_steps * self.dt
-            return self
-
-    sim = Sim()
-    cap_simulated_time(sim, 1.0)
-    sim.run(t_end=5.0)
-    assert sim.state.time == pytest.approx(1.0) and time_capped(sim)
-    sim.run(n_steps=100)
-    assert sim.state.time == pytest.approx(1.0)
-    free = Sim()
+    topo = build_topology(structured_rectangle(2, 2, 1.0, 1.0))
+    model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
+    model.set_gravity(0.0, -9.81)
+    model.fix("bottom")
+    sim = Simulation(model, progress=False)
+    cap_simulated_time(sim, 10.5 * sim.dt)
+    sim.run(t_end=100 * sim.dt, energy_tolerance=None)
+    assert sim.state.step == 11 and time_capped(sim)  # ceil(10.5): reaches the cap, overruns it by < 1 step
+    sim.run(n_steps=100, energy_tolerance=None)
+    assert sim.state.step == 11
+    free = Simulation(model, progress=False)
     cap_simulated_time(free, None)
-    free.run(n_steps=30)
-    assert free.state.time == pytest.approx(3.0) and not time_capped(free)
+    free.run(n_steps=30, energy_tolerance=None)
+    assert free.state.step == 30 and not time_capped(free)
