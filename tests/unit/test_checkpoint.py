@@ -223,3 +223,27 @@ def test_provider_without_state_is_named():
     sim[0].add_provider(Push())
     with pytest.raises(TypeError, match="2: Push"):
         sim[0].state_dict()
+
+
+def test_a_checkpoint_written_by_the_flat_layout_loads_and_runs_on(reference):
+    """tests/data/checkpoint_flat_layout.npz was written by the package before its modules
+    moved into subpackages (the same scene, HALF steps). It must load into today's scene,
+    hold the state the uninterrupted run has at that step (equal to round-off: the kernels were
+    compiled afresh), and run on with the energy ledger closed."""
+    from pathlib import Path
+
+    ref, mid = reference
+    path = Path(__file__).resolve().parents[1] / "data" / "checkpoint_flat_layout.npz"
+    sim, cracks, contact = scene()
+    ck.load_checkpoint(sim, path)
+    assert sim.state.step == mid["steps"] == HALF
+    assert int(cracks.broken.sum()) == mid["broken"] and contact.n_touching == mid["touching"]
+    fresh = scene()
+    run(fresh[0], HALF)
+    scale = np.abs(fresh[0].state.x - fresh[0].x0).max()
+    assert np.abs(sim.state.x - fresh[0].state.x).max() <= 1e-9 * scale
+    run(sim, HALF)
+    assert sim.state.step == 2 * HALF
+    errors = [abs(r["balance_error_relative"]) for r in sim.history]
+    assert max(errors) < 1e-2
+    np.testing.assert_allclose(sim.state.x, ref[0].state.x, rtol=0, atol=1e-6 * scale)
