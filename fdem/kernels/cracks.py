@@ -7,51 +7,59 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
 ``nodes : (n, 4) int32``
     ``[A_p, A_q, B_q, B_p]`` (see :mod:`fdem.topology`). End 0 of the element is the node pair
     (0, 3), end 1 the pair (1, 2); the integration points are these two ends.
-``const : (n, 8) float64``
+``const : (n, N_CONST) float64``
     Per-element constants, one 64-byte row, already multiplied by the end weight ``w = L0/2``
-    where marked ``*w``:
+    where marked ``*w``; columns ``CC_*``:
 
-    ====  ===========  ===============================================================
-    col   symbol       meaning
-    ====  ===========  ===============================================================
-    0     ``Kn``       normal penalty stiffness of one end, ``k_n w`` [N/m]  (``*w``)
-    1     ``Kt``       tangential penalty stiffness, ``k_t w`` [N/m]          (``*w``)
-    2     ``op``       opening at the tensile peak ``o_p = f_t / k_n`` [m]
-    3     ``C``        cohesion force, ``c w`` [N]                            (``*w``)
-    4     ``tanphi``   friction coefficient ``tan(phi)`` [-]
-    5     ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage [1/m];
-                       negative for linear softening (the sign carries the shape, so the
-                       row stays one cache line)
-    6     ``inv_dK``   ``1/kappa_r``, inverse plastic slip to full damage [1/m] (0: no cohesion)
-    7     ``Kc``       normal stiffness in compression, ``k_c w`` [N/m]       (``*w``);
-                       ``Kn`` unless matched to contact (see ``CrackSet``)
-    ====  ===========  ===============================================================
+    ====  =============  ===========  ===========================================================
+    col   name           symbol       meaning
+    ====  =============  ===========  ===========================================================
+    0     ``CC_KN``      ``Kn``       normal penalty stiffness of one end, ``k_n w`` [N/m] (``*w``)
+    1     ``CC_KT``      ``Kt``       tangential penalty stiffness, ``k_t w`` [N/m]         (``*w``)
+    2     ``CC_OP``      ``op``       opening at the tensile peak ``o_p = f_t / k_n`` [m]
+    3     ``CC_C``       ``C``        cohesion force, ``c w`` [N]                           (``*w``)
+    4     ``CC_TANPHI``  ``tanphi``   friction coefficient ``tan(phi)`` [-]
+    5     ``CC_INV_DO``  ``inv_dO``   ``1/(o_r - o_p)``, inverse opening from peak to full damage
+                                      [1/m]; negative for linear softening (the sign carries the
+                                      shape, so the row stays one cache line)
+    6     ``CC_INV_DK``  ``inv_dK``   ``1/kappa_r``, inverse plastic slip to full damage [1/m]
+                                      (0: no cohesion)
+    7     ``CC_KC``      ``Kc``       normal stiffness in compression, ``k_c w`` [N/m]      (``*w``);
+                                      ``Kn`` unless matched to contact (see ``CrackSet``)
+    ====  =============  ===========  ===========================================================
 
     A strength reduction or heterogeneity changes the numbers in these rows, never the code.
 ``status : (n,) int8``
     0 while the element has never left the elastic range (its ``state`` row is then all
     zero and is not read), 1 after it first damaged or slid.
-``state : (n, 12) float64``
-    ``[D, kappa, s_pl]`` of end 0 then of end 1: damage (never decreases, >= 1 is fully
+``state : (n, N_STATE) float64``
+    Columns ``CS_*``. ``[D, kappa, s_pl]`` of end 0 then of end 1 (``CS_END`` columns on): damage (never decreases, >= 1 is fully
     damaged), accumulated plastic slip [m], signed plastic slip [m]; then the shear traction
     applied at the last update of end 0 and of end 1 [N/m per end] (for the trapezoidal
     booking of plastic work, see :func:`point_law`); then the normal traction applied at the
     last update of end 0 and of end 1 [N/m per end] (trapezoidal booking of the dilatant
     work); then the dilatant opening ``d`` of end 0 and of end 1 [m] (joint dilation: the law
     sees the effective opening ``o - d``).
-``dil : (n, 2) float64``
-    ``[tan(psi), u_lim]``: dilation coefficient [-] and the plastic slip [m] beyond which the
+``dil : (n, N_DIL) float64``
+    ``[tan(psi), u_lim]`` (columns ``CD_TANPSI``, ``CD_ULIM``): dilation coefficient [-] and the plastic slip [m] beyond which the
     end stops dilating (``fdem.cohesive.CrackProperties.dilation_angle`` / ``dilation_limit``).
     Read only in the inelastic branch (an element on the elastic fast path has no plastic
     slip, so it has no dilation), which is why it is not part of the 64-byte ``const`` row.
-``diss : (n, 3) float64``
+``diss : (n, N_DISS) float64``
     Energy dissipated by each element [J per metre of thickness]: mode-I (normal damage),
-    mode-II (cohesive part of the shear strength), friction inside the intact element.
-``offset : (n, 4) float64``
-    ``[o0, s0, o1, s1]``: separation offsets [m] added to the measured opening and slip of end
+    mode-II (cohesive part of the shear strength), friction inside the intact element
+    (columns ``CW_MODE_I``, ``CW_MODE_II``, ``CW_FRICTION``).
+``offset : (n, N_OFFSET) float64``
+    ``[o0, s0, o1, s1]`` (columns ``CO_O0, CO_S0, CO_O1, CO_S1``): separation offsets [m] added to the measured opening and slip of end
     0 and end 1. Zero by default; a geostatic start pre-loads the elements through them (the
     law then gives the equilibrium traction at zero separation), as the triangles' initial
     stress pre-loads the triangles.
+``fe : (n, N_FE) float64``
+    ``[F0x, F0y, F1x, F1y]`` (columns ``CF_*``): force on the A node of end 0 and of end 1
+    [N/m], the per-element store of the store-and-gather scheme.
+
+The column names are module-level integers, compile-time constants in the kernels: the
+machine code is the same as with the bare numbers.
 
 The law (per integration point, per unit area; Munjiza 2004 ch. 7; Munjiza, Andrews & White
 1999; Lisjak et al. 2014, elliptical mixed-mode interaction) is documented in
@@ -64,6 +72,11 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = ["EM_A", "EM_B", "EM_C", "MUNJIZA", "LINEAR", "N_CONST", "N_STATE", "N_STATE_V1", "N_DIL",
+           "CC_KN", "CC_KT", "CC_OP", "CC_C", "CC_TANPHI", "CC_INV_DO", "CC_INV_DK", "CC_KC",
+           "CS_D0", "CS_KAP0", "CS_SPL0", "CS_D1", "CS_KAP1", "CS_SPL1", "CS_END", "CS_TAU0", "CS_TAU1",
+           "CS_SIG0", "CS_SIG1", "CS_DIL0", "CS_DIL1", "CD_TANPSI", "CD_ULIM",
+           "CW_MODE_I", "CW_MODE_II", "CW_FRICTION", "N_DISS", "CO_O0", "CO_S0", "CO_O1", "CO_S1", "CO_END",
+           "N_OFFSET", "CF_F0X", "CF_F0Y", "CF_F1X", "CF_F1Y", "CF_END", "N_FE",
            "UNKNOWN_TRACTION", "PARALLEL_MIN", "softening", "point_law", "element_update",
            "update_and_scatter", "crack_forces_coloured", "crack_forces_serial", "crack_forces_store",
            "gather_node_forces", "colour_elements", "end_separations", "crack_elastic_energy",
@@ -86,18 +99,70 @@ MUNJIZA = 0
 LINEAR = 1
 
 
+# Columns of ``const`` (one row per element; ``*w``: multiplied by the end weight w = L0/2).
+CC_KN = 0  # normal penalty stiffness of one end in tension, k_n w [N/m]
+CC_KT = 1  # tangential penalty stiffness of one end, k_t w [N/m]
+CC_OP = 2  # opening at the tensile peak, o_p = f_t / k_n [m]
+CC_C = 3  # cohesion force of one end, c w [N]
+CC_TANPHI = 4  # friction coefficient tan(phi) [-]
+CC_INV_DO = 5  # 1/(o_r - o_p), inverse opening from peak to full damage [1/m]; < 0: linear softening
+CC_INV_DK = 6  # 1/kappa_r, inverse plastic slip to full damage [1/m] (0: no cohesion)
+CC_KC = 7  # normal stiffness of one end in compression, k_c w [N/m]
 N_CONST = 8
 
 
+# Columns of ``state``: [D, kappa, s_pl] of end 0, then of end 1 (CS_END columns on), then the
+# end-0/end-1 pairs of the last shear traction, the last normal traction and the dilatant opening.
+CS_D0 = 0  # damage of end 0 [-] (never decreases; >= 1 fully damaged)
+CS_KAP0 = 1  # accumulated plastic slip kappa of end 0 [m]
+CS_SPL0 = 2  # signed plastic slip s_pl of end 0 [m]
+CS_D1 = 3  # damage of end 1 [-]
+CS_KAP1 = 4  # accumulated plastic slip kappa of end 1 [m]
+CS_SPL1 = 5  # signed plastic slip s_pl of end 1 [m]
+CS_END = 3  # column stride of [D, kappa, s_pl] from end 0 to end 1 (end e: CS_D0 + CS_END e, ...)
+CS_TAU0 = 6  # shear traction applied at the last update of end 0 [N/m per end] (end e: CS_TAU0 + e)
+CS_TAU1 = 7  # shear traction applied at the last update of end 1 [N/m per end]
+CS_SIG0 = 8  # normal traction applied at the last update of end 0 [N/m per end] (end e: CS_SIG0 + e)
+CS_SIG1 = 9  # normal traction applied at the last update of end 1 [N/m per end]
+CS_DIL0 = 10  # dilatant opening d of end 0 [m] (end e: CS_DIL0 + e)
+CS_DIL1 = 11  # dilatant opening d of end 1 [m]
 N_STATE = 12
 
 
 N_STATE_V1 = 8
-"""State columns before joint dilation (``[D, kappa, s_pl] x 2, tau_prev x 2``): checkpoints
-written then are padded on load (``sigma_prev`` unknown, ``d = 0``)."""
+"""State columns before joint dilation (``[D, kappa, s_pl] x 2, tau_prev x 2``, up to
+``CS_SIG0``): checkpoints written then are padded on load (``sigma_prev`` unknown, ``d = 0``)."""
 
 
+# Columns of ``dil``.
+CD_TANPSI = 0  # dilation coefficient tan(psi) [-]
+CD_ULIM = 1  # plastic slip u_lim beyond which the end stops dilating [m]
 N_DIL = 2
+
+
+# Columns of ``diss`` (energy dissipated per element [J/m]).
+CW_MODE_I = 0  # mode I: normal damage [J/m]
+CW_MODE_II = 1  # mode II: cohesive part of the shear strength [J/m]
+CW_FRICTION = 2  # friction inside the intact element, dilatant work included [J/m]
+N_DISS = 3
+
+
+# Columns of ``offset`` (separation offsets added to the measured separations).
+CO_O0 = 0  # opening offset of end 0 [m] (end e: CO_O0 + CO_END e)
+CO_S0 = 1  # slip offset of end 0 [m] (end e: CO_S0 + CO_END e)
+CO_O1 = 2  # opening offset of end 1 [m]
+CO_S1 = 3  # slip offset of end 1 [m]
+CO_END = 2  # column stride of [o, s] from end 0 to end 1
+N_OFFSET = 4
+
+
+# Columns of ``fe`` (store-and-gather: force on the A node of each end; the B node gets minus it).
+CF_F0X = 0  # x force of end 0 [N/m] (end e: CF_F0X + CF_END e)
+CF_F0Y = 1  # y force of end 0 [N/m] (end e: CF_F0Y + CF_END e)
+CF_F1X = 2  # x force of end 1 [N/m]
+CF_F1Y = 3  # y force of end 1 [N/m]
+CF_END = 2  # column stride of [Fx, Fy] from end 0 to end 1
+N_FE = 4
 
 
 UNKNOWN_TRACTION = -1.0e308
@@ -323,17 +388,17 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
     d0y = y3 - y0
     d1x = x2 - x1
     d1y = y2 - y1
-    o0 = d0x * nx + d0y * ny + offset[c, 0]
-    s0 = d0x * tx + d0y * ty + offset[c, 1]
-    o1 = d1x * nx + d1y * ny + offset[c, 2]
-    s1 = d1x * tx + d1y * ty + offset[c, 3]
+    o0 = d0x * nx + d0y * ny + offset[c, CO_O0]
+    s0 = d0x * tx + d0y * ty + offset[c, CO_S0]
+    o1 = d1x * nx + d1y * ny + offset[c, CO_O1]
+    s1 = d1x * tx + d1y * ty + offset[c, CO_S1]
 
-    Kn = const[c, 0]
-    Kt = const[c, 1]
-    op = const[c, 2]
-    C = const[c, 3]
-    tanphi = const[c, 4]
-    Kc = const[c, 7]
+    Kn = const[c, CC_KN]
+    Kt = const[c, CC_KT]
+    op = const[c, CC_OP]
+    C = const[c, CC_C]
+    tanphi = const[c, CC_TANPHI]
+    Kc = const[c, CC_KC]
     # Fast path of point_law for both ends at once (nearly every element, every step): an
     # element that never left the elastic range (status 0: D = kappa = s_pl = 0) and stays
     # below the tensile peak and inside the Mohr-Coulomb envelope. Reads no state, stores nothing.
@@ -350,38 +415,38 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
         np0 = UNKNOWN_TRACTION
         np1 = UNKNOWN_TRACTION
         if status[c] != 0:
-            tp0 = state[c, 6]
-            tp1 = state[c, 7]
-            np0 = state[c, 8]
-            np1 = state[c, 9]
+            tp0 = state[c, CS_TAU0]
+            tp1 = state[c, CS_TAU1]
+            np0 = state[c, CS_SIG0]
+            np1 = state[c, CS_SIG1]
         status[c] = 1
-        signed_inv_dO = const[c, 5]
+        signed_inv_dO = const[c, CC_INV_DO]
         inv_dO = abs(signed_inv_dO)
-        inv_dK = const[c, 6]
+        inv_dK = const[c, CC_INV_DK]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
-        tanpsi = dil[c, 0]
-        ulim = dil[c, 1]
+        tanpsi = dil[c, CD_TANPSI]
+        ulim = dil[c, CD_ULIM]
         sig0, tau0, Dn0, kn0, sn0, dn0, wI0, wII0, wf0 = point_law(
-            o0, s0, state[c, 0], state[c, 1], state[c, 2], tp0, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
-            state[c, 10], np0, tanpsi, ulim)
+            o0, s0, state[c, CS_D0], state[c, CS_KAP0], state[c, CS_SPL0], tp0, Kn, Kt, op, C, tanphi, inv_dO,
+            inv_dK, kind, Kc, state[c, CS_DIL0], np0, tanpsi, ulim)
         sig1, tau1, Dn1, kn1, sn1, dn1, wI1, wII1, wf1 = point_law(
-            o1, s1, state[c, 3], state[c, 4], state[c, 5], tp1, Kn, Kt, op, C, tanphi, inv_dO, inv_dK, kind, Kc,
-            state[c, 11], np1, tanpsi, ulim)
-        state[c, 0] = Dn0
-        state[c, 1] = kn0
-        state[c, 2] = sn0
-        state[c, 3] = Dn1
-        state[c, 4] = kn1
-        state[c, 5] = sn1
-        state[c, 6] = tau0
-        state[c, 7] = tau1
-        state[c, 8] = sig0
-        state[c, 9] = sig1
-        state[c, 10] = dn0
-        state[c, 11] = dn1
-        diss[c, 0] += wI0 + wI1
-        diss[c, 1] += wII0 + wII1
-        diss[c, 2] += wf0 + wf1
+            o1, s1, state[c, CS_D1], state[c, CS_KAP1], state[c, CS_SPL1], tp1, Kn, Kt, op, C, tanphi, inv_dO,
+            inv_dK, kind, Kc, state[c, CS_DIL1], np1, tanpsi, ulim)
+        state[c, CS_D0] = Dn0
+        state[c, CS_KAP0] = kn0
+        state[c, CS_SPL0] = sn0
+        state[c, CS_D1] = Dn1
+        state[c, CS_KAP1] = kn1
+        state[c, CS_SPL1] = sn1
+        state[c, CS_TAU0] = tau0
+        state[c, CS_TAU1] = tau1
+        state[c, CS_SIG0] = sig0
+        state[c, CS_SIG1] = sig1
+        state[c, CS_DIL0] = dn0
+        state[c, CS_DIL1] = dn1
+        diss[c, CW_MODE_I] += wI0 + wI1
+        diss[c, CW_MODE_II] += wII0 + wII1
+        diss[c, CW_FRICTION] += wf0 + wf1
         # Faces turned more than 90 degrees apart (face A along x1 - x0, face B along x2 - x3,
         # parallel at the reference): the element only hinges on one end, which in this law is
         # a frictionless pin, and its mid-line frame degenerates as the fold nears 180 degrees
@@ -456,10 +521,10 @@ def crack_forces_store(x, nodes, const, status, state, diss, offset, dil, active
     for j in prange(active.shape[0]):
         c = active[j]
         broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
-        fe[c, 0] = F0x
-        fe[c, 1] = F0y
-        fe[c, 2] = F1x
-        fe[c, 3] = F1y
+        fe[c, CF_F0X] = F0x
+        fe[c, CF_F0Y] = F0y
+        fe[c, CF_F1X] = F1x
+        fe[c, CF_F1Y] = F1y
         if broke:
             broke_flag[c] = 1
             nb += 1
@@ -484,8 +549,8 @@ def gather_node_forces(f, node_list, node_map, fe):
                 slot = code & 3
                 end = 1 if (slot == 1 or slot == 2) else 0
                 sgn = 1.0 if slot < 2 else -1.0
-                fx += sgn * fe[c, 2 * end]
-                fy += sgn * fe[c, 2 * end + 1]
+                fx += sgn * fe[c, CF_F0X + CF_END * end]
+                fy += sgn * fe[c, CF_F0Y + CF_END * end]
         f[n, 0] += fx
         f[n, 1] += fy
 
@@ -531,8 +596,8 @@ def end_separations(c, x, nodes, offset):
     d0y = x[i3, 1] - x[i0, 1]
     d1x = x[i2, 0] - x[i1, 0]
     d1y = x[i2, 1] - x[i1, 1]
-    return (d0x * ty - d0y * tx + offset[c, 0], d0x * tx + d0y * ty + offset[c, 1],
-            d1x * ty - d1y * tx + offset[c, 2], d1x * tx + d1y * ty + offset[c, 3])
+    return (d0x * ty - d0y * tx + offset[c, CO_O0], d0x * tx + d0y * ty + offset[c, CO_S0],
+            d1x * ty - d1y * tx + offset[c, CO_O1], d1x * tx + d1y * ty + offset[c, CO_S1])
 
 
 @njit(cache=True, fastmath=True)
@@ -544,8 +609,8 @@ def crack_elastic_energy(x, nodes, const, state, offset, active):
     for j in range(active.shape[0]):
         c = active[j]
         o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
-        e += _end_energy(o0, s0, state[c, 0], state[c, 2], state[c, 10], const[c])
-        e += _end_energy(o1, s1, state[c, 3], state[c, 5], state[c, 11], const[c])
+        e += _end_energy(o0, s0, state[c, CS_D0], state[c, CS_SPL0], state[c, CS_DIL0], const[c])
+        e += _end_energy(o1, s1, state[c, CS_D1], state[c, CS_SPL1], state[c, CS_DIL1], const[c])
     return e
 
 
@@ -557,7 +622,7 @@ def stable_dt_kernel(mass, nodes, const, active, n_nodes):
     K = np.zeros(n_nodes)
     for j in range(active.shape[0]):
         c = active[j]
-        k = max(const[c, 0], const[c, 1], const[c, 7])
+        k = max(const[c, CC_KN], const[c, CC_KT], const[c, CC_KC])
         for q in range(4):
             K[nodes[c, q]] += k
     dt = np.inf
@@ -576,13 +641,13 @@ def stable_dt_kernel(mass, nodes, const, active, n_nodes):
 def secant_stiffness(D, const_row):
     """Secant normal stiffness ``sec(D) = z(D) F_t / (o_p + D (o_r - o_p))`` of an end with
     damage ``D`` (``K_n`` at ``D = 0``, 0 at ``D >= 1``), from one constant row [N/m per end]."""
-    Kn = const_row[0]
+    Kn = const_row[CC_KN]
     if D <= 0.0:
         return Kn
     if D >= 1.0:
         return 0.0
-    op = const_row[2]
-    signed_inv_dO = const_row[5]
+    op = const_row[CC_OP]
+    signed_inv_dO = const_row[CC_INV_DO]
     kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
     return softening(D, kind) * Kn * op / (op + D / abs(signed_inv_dO))
 
@@ -606,7 +671,7 @@ def remap_damage(old_const, new_const, state, status, active):
         if status[c] == 0:
             continue
         for end in range(2):
-            D = state[c, 3 * end]
+            D = state[c, CS_D0 + CS_END * end]
             if D <= 0.0 or D >= 1.0:
                 continue
             target = secant_stiffness(D, old_const[c])
@@ -618,7 +683,7 @@ def remap_damage(old_const, new_const, state, status, active):
                     lo = mid
                 else:
                     hi = mid
-            state[c, 3 * end] = 0.5 * (lo + hi)
+            state[c, CS_D0 + CS_END * end] = 0.5 * (lo + hi)
 
 
 @njit(cache=True, fastmath=True)
@@ -628,8 +693,8 @@ def _end_energy(o, s, D, sp, d, const_row):
     opos = max(o - d, 0.0)
     oneg = min(o - d, 0.0)
     ds = s - sp
-    return 0.5 * (secant_stiffness(D, const_row) * opos * opos + const_row[7] * oneg * oneg
-                  + const_row[1] * ds * ds)
+    return 0.5 * (secant_stiffness(D, const_row) * opos * opos + const_row[CC_KC] * oneg * oneg
+                  + const_row[CC_KT] * ds * ds)
 
 
 @njit(cache=True, fastmath=True)
@@ -649,45 +714,45 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, activ
     for j in range(active.shape[0]):
         c = active[j]
         o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
-        Kn = const[c, 0]
-        Kt = const[c, 1]
-        op = const[c, 2]
-        C = const[c, 3]
-        tanphi = const[c, 4]
-        signed_inv_dO = const[c, 5]
-        inv_dK = const[c, 6]
-        Kc = const[c, 7]
+        Kn = const[c, CC_KN]
+        Kt = const[c, CC_KT]
+        op = const[c, CC_OP]
+        C = const[c, CC_C]
+        tanphi = const[c, CC_TANPHI]
+        signed_inv_dO = const[c, CC_INV_DO]
+        inv_dK = const[c, CC_INV_DK]
+        Kc = const[c, CC_KC]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
         for end in range(2):
             o = o0 if end == 0 else o1
             s = s0 if end == 0 else s1
-            D = state[c, 3 * end]
-            kap = state[c, 3 * end + 1]
-            sp = state[c, 3 * end + 2]
-            d = state[c, 10 + end]
+            D = state[c, CS_D0 + CS_END * end]
+            kap = state[c, CS_KAP0 + CS_END * end]
+            sp = state[c, CS_SPL0 + CS_END * end]
+            d = state[c, CS_DIL0 + end]
             before = _end_energy(o, s, D, sp, d, const[c])
             sig, tau, Dn, kn, sn, dn, wI, wII, wf = point_law(
                 o, s, D, kap, sp, UNKNOWN_TRACTION, Kn, Kt, op, C, tanphi, abs(signed_inv_dO), inv_dK, kind, Kc,
-                d, UNKNOWN_TRACTION, dil[c, 0], dil[c, 1])
+                d, UNKNOWN_TRACTION, dil[c, CD_TANPSI], dil[c, CD_ULIM])
             if Dn == D and kn == kap:
                 continue
             if status[c] == 0:
                 # The other end keeps its zero state; its normal traction history is unknown.
-                state[c, 8 + 1 - end] = UNKNOWN_TRACTION
+                state[c, CS_SIG0 + 1 - end] = UNKNOWN_TRACTION
             status[c] = 1
-            state[c, 3 * end] = Dn
-            state[c, 3 * end + 1] = kn
-            state[c, 3 * end + 2] = sn
-            state[c, 6 + end] = tau
-            state[c, 8 + end] = sig
-            state[c, 10 + end] = dn
+            state[c, CS_D0 + CS_END * end] = Dn
+            state[c, CS_KAP0 + CS_END * end] = kn
+            state[c, CS_SPL0 + CS_END * end] = sn
+            state[c, CS_TAU0 + end] = tau
+            state[c, CS_SIG0 + end] = sig
+            state[c, CS_DIL0 + end] = dn
             released = max(before - _end_energy(o, s, Dn, sn, dn, const[c]), 0.0)
             share = wI + wII + wf
             if share > 0.0:
-                diss[c, 0] += released * wI / share
-                diss[c, 1] += released * wII / share
-                diss[c, 2] += released * wf / share
+                diss[c, CW_MODE_I] += released * wI / share
+                diss[c, CW_MODE_II] += released * wII / share
+                diss[c, CW_FRICTION] += released * wf / share
             else:
-                diss[c, 0] += released
+                diss[c, CW_MODE_I] += released
             total += released
     return total

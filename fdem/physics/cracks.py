@@ -32,7 +32,8 @@ from fdem.mesh.topology import INTACT, Topology
 from fdem.physics.crack_properties import CrackProperties, ELASTIC_ONLY_LIMIT, SOFTENING_KINDS, softening_integral, softening_max_slope
 from fdem.physics.heterogeneity import Heterogeneity
 
-__all__ = ["EVENT_DTYPE", "MODE_NAMES", "MODE_SHARE", "CrackSet"]
+__all__ = ["EVENT_DTYPE", "MODE_NAMES", "MODE_SHARE", "CP_FT", "CP_C", "CP_TANPHI", "CP_GI", "CP_GII", "CP_KIND",
+           "CP_TANPHI_RES", "N_PROPS", "CrackSet"]
 
 
 EVENT_DTYPE = np.dtype([
@@ -53,6 +54,17 @@ MODE_SHARE = 0.2
 """Failure mode of an event from the elliptical damage at breakage: with
 ``share = xi_II^2 / D^2`` (mean of the two ends), mode I when ``share < 0.2``, mode II when
 ``share > 0.8``, mixed otherwise."""
+
+
+# Columns of the property table ``CrackSet.props`` (one row per tag, unreduced, no heterogeneity).
+CP_FT = 0  # tensile strength f_t [Pa]
+CP_C = 1  # cohesion c [Pa]
+CP_TANPHI = 2  # friction coefficient tan(phi) [-]
+CP_GI = 3  # mode-I fracture energy G_I [J/m^2]
+CP_GII = 4  # mode-II fracture energy G_II [J/m^2]
+CP_KIND = 5  # softening shape, fdem.kernels.cracks.MUNJIZA or LINEAR (stored as float)
+CP_TANPHI_RES = 6  # residual friction coefficient of the broken faces tan(phi_res) [-]
+N_PROPS = 7
 
 
 class CrackSet:
@@ -118,15 +130,16 @@ class CrackSet:
         self.nodes = np.ascontiguousarray(topology.crack_nodes, dtype=np.int32)
         self.strength_multiplier = self.heterogeneity.draw(tag)
 
-        # Small property table indexed by tag: [f_t, c, tan(phi), G_I, G_II, kind, tan(phi_res)].
+        # Small property table indexed by tag: [f_t, c, tan(phi), G_I, G_II, kind, tan(phi_res)] (CP_*).
         n_tags = int(max(self.property_sets)) + 1 if self.property_sets else 1
-        self.props = np.zeros((n_tags, 7))
+        self.props = np.zeros((n_tags, N_PROPS))
         for t, p in self.property_sets.items():
-            self.props[t] = [p.f_t, p.c, p.tan_phi, p.G_I, p.G_II, SOFTENING_KINDS[p.softening], p.tan_phi_res]
-        # Dilation by tag: [tan(psi), u_lim]; geometric, not reduced (see _fill_constants).
+            self.props[t, [CP_FT, CP_C, CP_TANPHI, CP_GI, CP_GII, CP_KIND, CP_TANPHI_RES]] = [
+                p.f_t, p.c, p.tan_phi, p.G_I, p.G_II, SOFTENING_KINDS[p.softening], p.tan_phi_res]
+        # Dilation by tag: [tan(psi), u_lim] (K.CD_*); geometric, not reduced (see _fill_constants).
         self.dilation = np.zeros((n_tags, K.N_DIL))
         for t, p in self.property_sets.items():
-            self.dilation[t] = [p.tan_psi, p.dilation_limit]
+            self.dilation[t, [K.CD_TANPSI, K.CD_ULIM]] = [p.tan_psi, p.dilation_limit]
         self.kn = np.empty(n)
         self.kt = np.empty(n)
         for t in present:
@@ -162,8 +175,8 @@ class CrackSet:
         self._const = np.zeros((n, K.N_CONST))
         self._status = np.zeros(n, dtype=np.int8)
         self._state = np.zeros((n, K.N_STATE))
-        self._diss = np.zeros((n, 3))
-        self._offset = np.zeros((n, 4))
+        self._diss = np.zeros((n, K.N_DISS))
+        self._offset = np.zeros((n, K.N_OFFSET))
         self._dil = np.zeros((n, K.N_DIL))
         self._fill_constants()
         self.interfaces.subscribe(self._fill_constants, check=self._check_snap_back)
@@ -179,7 +192,7 @@ class CrackSet:
         self._x_last: np.ndarray | None = None
 
         if scheme == "gather":
-            self._fe = np.zeros((n, 4))
+            self._fe = np.zeros((n, K.N_FE))
             self._node_map = np.full((topology.n_nodes, 2), -1, dtype=np.int64)
             codes = (4 * np.arange(n)[:, None] + np.arange(4)[None, :]).ravel()
             nodes_flat = self._nodes.ravel().astype(np.int64)
@@ -198,7 +211,8 @@ class CrackSet:
         P = self.props[self.tag]
         h = self.strength_multiplier
         ft_factor = 1.0 / reduction if self.interfaces.reduce_tensile else 1.0
-        return P[:, 0] * h * ft_factor, P[:, 1] * h / reduction, P[:, 2] / reduction, P[:, 3], P[:, 4], P[:, 5]
+        return (P[:, CP_FT] * h * ft_factor, P[:, CP_C] * h / reduction, P[:, CP_TANPHI] / reduction, P[:, CP_GI],
+                P[:, CP_GII], P[:, CP_KIND])
 
     def _check_snap_back(self, reduction: float) -> None:
         """G must exceed the elastic energy at the peak, or the softening branch snaps back.
@@ -245,18 +259,18 @@ class CrackSet:
         with np.errstate(divide="ignore"):
             inv_dK = np.where(c > 0, c * zbar / np.where(GII > 0, GII, 1.0), 0.0)
         C = np.empty_like(self._const)
-        C[:, 0] = self.kn * w
-        C[:, 1] = self.kt * w
-        C[:, 2] = ft / self.kn
-        C[:, 3] = c * w
-        C[:, 4] = tanphi
-        C[:, 5] = np.where(kind == K.LINEAR, -1.0, 1.0) / dO  # sign: softening shape
-        C[:, 6] = inv_dK
-        C[:, 7] = self.kc * w
+        C[:, K.CC_KN] = self.kn * w
+        C[:, K.CC_KT] = self.kt * w
+        C[:, K.CC_OP] = ft / self.kn
+        C[:, K.CC_C] = c * w
+        C[:, K.CC_TANPHI] = tanphi
+        C[:, K.CC_INV_DO] = np.where(kind == K.LINEAR, -1.0, 1.0) / dO  # sign: softening shape
+        C[:, K.CC_INV_DK] = inv_dK
+        C[:, K.CC_KC] = self.kc * w
         if self._elastic_only:
             # Peak opening and cohesion out of reach: every update takes the elastic fast path.
-            C[:, 2] = ELASTIC_ONLY_LIMIT
-            C[:, 3] = ELASTIC_ONLY_LIMIT
+            C[:, K.CC_OP] = ELASTIC_ONLY_LIMIT
+            C[:, K.CC_C] = ELASTIC_ONLY_LIMIT
         self._dil[:] = self._dilation_constants(tanphi)[self._perm]
         new = np.ascontiguousarray(C[self._perm])
         if not hasattr(self, "_active"):  # construction: nothing to carry over
@@ -282,8 +296,9 @@ class CrackSet:
         create energy. The cap acts only where ``F > tan(phi)/tan(psi)``; the dilatant opening
         already accumulated is state and does not change (no stored energy is created or lost).
         """
-        D = self.dilation[self.tag]
-        return np.column_stack([np.minimum(D[:, 0], tanphi), D[:, 1]])
+        D = self.dilation[self.tag]  # a copy (fancy indexing)
+        D[:, K.CD_TANPSI] = np.minimum(D[:, K.CD_TANPSI], tanphi)
+        return D
 
     def hold_elastic(self, on: bool = True) -> None:
         """Keep every element elastic (no damage, no breakage, no shear yield) while ``on``.
@@ -345,12 +360,12 @@ class CrackSet:
         t = (m1 - m0) / np.maximum(np.linalg.norm(m1 - m0, axis=1, keepdims=True), 1e-300)
         nrm = np.column_stack([t[:, 1], -t[:, 0]])
         w = 0.5 * self.length0
-        off = np.zeros((n, 4))
+        off = np.zeros((n, K.N_OFFSET))
         for e in range(2):
             fn = (F[:, e] * nrm).sum(axis=1)
             ft = (F[:, e] * t).sum(axis=1)
-            off[:, 2 * e] = fn / (np.where(fn > 0.0, self.kn, self.kc) * w)
-            off[:, 2 * e + 1] = ft / (self.kt * w)
+            off[:, K.CO_O0 + K.CO_END * e] = fn / (np.where(fn > 0.0, self.kn, self.kc) * w)
+            off[:, K.CO_S0 + K.CO_END * e] = ft / (self.kt * w)
         self._offset[:] = off[self._perm]
 
     @property
@@ -428,12 +443,12 @@ class CrackSet:
         # Elastic energy still held at breakage (e.g. friction stress, closure) is released.
         self.released += K.crack_elastic_energy(x, self._nodes, self._const, self._state, self._offset, ids)
         mid = 0.25 * x[self._nodes[ids]].sum(axis=1)
-        wI, wII = self._diss[ids, 0], self._diss[ids, 1]
+        wI, wII = self._diss[ids, K.CW_MODE_I], self._diss[ids, K.CW_MODE_II]
         # Mode from the elliptical damage at failure: share of xi_II^2 in D^2, averaged over ends.
         share = np.zeros(ids.size)
         for e in (0, 1):
-            D = np.maximum(self._state[ids, 3 * e], 1e-300)
-            xi2 = self._state[ids, 3 * e + 1] * self._const[ids, 6]
+            D = np.maximum(self._state[ids, K.CS_D0 + K.CS_END * e], 1e-300)
+            xi2 = self._state[ids, K.CS_KAP0 + K.CS_END * e] * self._const[ids, K.CC_INV_DK]
             share += 0.5 * np.minimum((xi2 / D) ** 2, 1.0)
         mode = np.where(share < MODE_SHARE, "I", np.where(share > 1 - MODE_SHARE, "II", "mixed"))
         self.failure_mode[topo_ids] = np.where(share < MODE_SHARE, 1, np.where(share > 1 - MODE_SHARE, 2, 3))
@@ -465,12 +480,12 @@ class CrackSet:
     @property
     def damage(self) -> np.ndarray:
         """(n,) element damage in [0, 1]: the larger of its two ends (1 for broken elements)."""
-        return np.minimum(self._state[self._inv][:, [0, 3]].max(axis=1), 1.0)
+        return np.minimum(self._state[self._inv][:, [K.CS_D0, K.CS_D1]].max(axis=1), 1.0)
 
     @property
     def damage_ip(self) -> np.ndarray:
         """(n, 2) damage at the two integration points (element ends 0-3 and 1-2)."""
-        return np.minimum(self._state[self._inv][:, [0, 3]], 1.0)
+        return np.minimum(self._state[self._inv][:, [K.CS_D0, K.CS_D1]], 1.0)
 
     @property
     def dissipated(self) -> np.ndarray:
@@ -486,7 +501,7 @@ class CrackSet:
             "damage": self.damage,
             "broken": self.broken.astype(np.int8),
             "failure_mode": self.failure_mode,
-            "fracture_energy": d[:, 0] + d[:, 1],
+            "fracture_energy": d[:, K.CW_MODE_I] + d[:, K.CW_MODE_II],
             "strength_multiplier": self.strength_multiplier,
         }
 
@@ -505,8 +520,8 @@ class CrackSet:
                                               self._active))
         return {
             "crack_elastic": el,
-            "fracture": float(self._diss[:, 0].sum() + self._diss[:, 1].sum()),
-            "crack_friction": float(self._diss[:, 2].sum()),
+            "fracture": float(self._diss[:, K.CW_MODE_I].sum() + self._diss[:, K.CW_MODE_II].sum()),
+            "crack_friction": float(self._diss[:, K.CW_FRICTION].sum()),
             "crack_released": float(self.released),
         }
 
@@ -562,13 +577,13 @@ class CrackSet:
         if state.shape[1] == K.N_STATE_V1:  # saved before joint dilation: no sigma_prev, no d
             self._state[:] = 0.0
             self._state[:, :K.N_STATE_V1] = state
-            self._state[:, 8:10] = K.UNKNOWN_TRACTION
+            self._state[:, K.CS_SIG0:K.CS_SIG1 + 1] = K.UNKNOWN_TRACTION
         else:
             self._state[:] = state
         if "dilation" in d:
             self._dil[:] = d["dilation"]
         else:
-            self._dil[:] = self._dilation_constants(self.props[self.tag, 2] / float(d["reduction"]))[self._perm]
+            self._dil[:] = self._dilation_constants(self.props[self.tag, CP_TANPHI] / float(d["reduction"]))[self._perm]
         self.broken[:] = d["broken"]
         self.failure_mode[:] = d["failure_mode"]
         self.strength_multiplier = np.array(d["strength_multiplier"], dtype=np.float64)

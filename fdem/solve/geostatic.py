@@ -35,6 +35,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 from numba import njit, prange
 from fdem.kernels.triangles import (FASTMATH, TC_MASS, assemble_triangle_forces, triangle_constants, triangle_response)
+from fdem.physics.cracks import CP_C, CP_FT, CP_TANPHI
 from fdem.solve.model import FIX_X, FIX_Y
 
 __all__ = ["GeostaticSolution", "GeostaticReport", "conforming_static_stress", "nodal_residual",
@@ -426,7 +427,7 @@ def _crack_strengths(cracks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     factor = cracks.strength_factor
     P = cracks.props[cracks.tag]
     h = cracks.strength_multiplier
-    return P[:, 0] * h * factor, P[:, 1] * h * factor, P[:, 2] * factor
+    return P[:, CP_FT] * h * factor, P[:, CP_C] * h * factor, P[:, CP_TANPHI] * factor
 
 
 def crack_strength_check(cracks, forces) -> dict:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from fdem.physics.crack_properties import CrackProperties
+from fdem.kernels.cracks import CD_TANPSI, CS_DIL0, CW_FRICTION, N_STATE_V1
 from fdem.physics.cracks import CrackSet
 from test_cohesive import KN, KT, Driver, props, two_triangles
 
@@ -205,7 +206,7 @@ def test_strength_reduction_keeps_dilation_and_the_books():
     before = ledger(dr)
     dr.cs.scale_strength(0.8)
     assert ledger(dr) == pytest.approx(before, rel=1e-12)
-    assert dr.cs._dil[0, 0] == tanpsi
+    assert dr.cs._dil[0, CD_TANPSI] == tanpsi
     # Further slip: the confinement still grows at Kc tan(psi) per unit plastic slip.
     sig_a, tau_a, _, _ = dr.move(o, s + 1e-6)
     sig_b, tau_b, _, _ = dr.move(o, s + 2e-6)
@@ -213,14 +214,14 @@ def test_strength_reduction_keeps_dilation_and_the_books():
     assert (sig_a - sig_b) / dkap == pytest.approx(KN * tanpsi, rel=1e-9)
     # F = 4: tan(phi)/F = 0.144 < tan(psi) = 0.176: capped, the sliding dissipation stays >= 0.
     dr.cs.scale_strength(0.25)
-    assert dr.cs._dil[0, 0] == pytest.approx(0.25 * tanphi, rel=1e-12)
-    fr = dr.cs.dissipated[0, 2]
+    assert dr.cs._dil[0, CD_TANPSI] == pytest.approx(0.25 * tanphi, rel=1e-12)
+    fr = dr.cs.dissipated[0, CW_FRICTION]
     for si in np.linspace(s + 2e-6, s + 2e-5, 200)[1:]:
         dr.move(o, si)
-        assert dr.cs.dissipated[0, 2] >= fr
-        fr = dr.cs.dissipated[0, 2]
+        assert dr.cs.dissipated[0, CW_FRICTION] >= fr
+        fr = dr.cs.dissipated[0, CW_FRICTION]
     dr.cs.scale_strength(1.0)
-    assert dr.cs._dil[0, 0] == tanpsi
+    assert dr.cs._dil[0, CD_TANPSI] == tanpsi
 
 
 def test_checkpoint_round_trip_keeps_the_dilation():
@@ -235,12 +236,12 @@ def test_checkpoint_round_trip_keeps_the_dilation():
     assert np.array_equal(b.cs._dil, a.cs._dil)
     for s in np.linspace(3e-5, 5e-5, 50):
         assert a.move(o, s) == b.move(o, s)
-    # A state saved before dilation existed (8 columns) loads with d = 0.
+    # A state saved before dilation existed (N_STATE_V1 = 8 columns) loads with d = 0.
     st = a.cs.state_dict()
-    st["state"] = st["state"][:, :8]
+    st["state"] = st["state"][:, :N_STATE_V1]
     del st["dilation"]
     b.cs.load_state_dict(st)
-    assert np.all(b.cs._state[:, 10:] == 0.0) and np.array_equal(b.cs._dil, a.cs._dil)
+    assert np.all(b.cs._state[:, CS_DIL0:] == 0.0) and np.array_equal(b.cs._dil, a.cs._dil)
 
 
 def test_bad_dilation_input_is_rejected():
