@@ -208,7 +208,7 @@ class QuietBoundary:
         return {"kind": type(self).__name__, "absorbed": float(self.absorbed), "time": float(self.time),
                 "dt_last": float(self._dt_last), "f_last": None if self._f_last is None else self._f_last.copy()}
 
-    def load_state_dict(self, d: dict) -> None:
+    def load_state_dict(self, d: dict, x=None) -> None:
         self.absorbed = float(d["absorbed"])
         self.time = float(d["time"])
         self._dt_last = float(d["dt_last"])

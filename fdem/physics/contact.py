@@ -77,12 +77,13 @@ A pair of triangles across a broken crack element uses that element's residual f
 Activating a broken element never raises the friction of a face broken earlier. All of these
 are base values: the pair friction is ``mu_base / F`` with the current strength-reduction
 factor ``F`` (the crack set's :class:`~fdem.interfaces.Interfaces`, or
-:meth:`ContactSet.set_reduction` without crack elements), whatever broke when.
+``ContactSet.interfaces.set_reduction`` without crack elements), whatever broke when.
 """
 from __future__ import annotations
 
 from typing import Iterable
 import numpy as np
+from fdem.physics.interfaces import Interfaces
 from fdem.kernels import contact_pairs as kc
 from fdem.kernels import contact_search as ks
 from fdem.mesh.topology import Topology
@@ -274,7 +275,8 @@ class ContactSet:
             raise ValueError(f"tangential_ratio must be positive and finite, got {tangential_ratio!r}")
         self.tangential_ratio = tangential_ratio
         self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")  # base face friction
-        self._reduction = 1.0  # used when there is no crack set (else its interfaces hold F)
+        # the one home of the strength-reduction factor F: the crack elements' when there are any
+        self.interfaces = cracks.interfaces if cracks is not None else Interfaces({})
         # broken crack element between two triangles: sorted keys i * n_tri + j (i < j)
         ct = np.sort(np.asarray(topology.crack_triangles, dtype=np.int64), axis=1)
         ckeys = ct[:, 0] * n_tri + ct[:, 1]
@@ -364,7 +366,7 @@ class ContactSet:
             if already.size:
                 self.activate_cracks(already)
             self._watch_inelastic()
-            cracks.interfaces.subscribe(self._refresh_pair_friction)
+        self.interfaces.subscribe(self._refresh_pair_friction)
 
     # ------------------------------------------------------------------ state
     @property
@@ -532,7 +534,7 @@ class ContactSet:
     def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
         """Set the base face friction of ``triangles`` (default all), as ``friction_angle`` [deg]
         or ``mu = tan(phi)``, scalar or one per triangle (new joint or surface properties; a
-        strength reduction goes through :meth:`set_reduction` instead). Pairs across a broken
+        strength reduction goes through ``interfaces.set_reduction`` instead). Pairs across a broken
         crack element keep that element's friction. The pairs use it from the next step, their
         slip history is kept."""
         tris = np.arange(self.topology.n_triangles) if triangles is None else np.asarray(triangles, np.int64)
@@ -544,20 +546,9 @@ class ContactSet:
 
     @property
     def reduction(self) -> float:
-        """The strength-reduction factor ``F`` dividing every friction coefficient."""
-        return self.cracks.interfaces.reduction if self.cracks is not None else self._reduction
-
-    def set_reduction(self, factor: float) -> None:
-        """Set ``F`` (through the crack set's interfaces when there is one, so that crack
-        elements and contact always share it)."""
-        if self.cracks is not None:
-            self.cracks.interfaces.set_reduction(factor)
-            return
-        factor = float(factor)
-        if not (np.isfinite(factor) and factor > 0.0):
-            raise ValueError(f"strength-reduction factor F must be positive and finite, got {factor!r}")
-        self._reduction = factor
-        self._refresh_pair_friction()
+        """The strength-reduction factor ``F`` dividing every friction coefficient; it is set
+        through ``interfaces.set_reduction(F)`` (shared with the crack elements)."""
+        return self.interfaces.reduction
 
     def _pair_base_friction(self, pairs: np.ndarray, keys: np.ndarray) -> np.ndarray:
         """Base friction of each pair: the broken crack element between them, else the lower
@@ -577,10 +568,6 @@ class ContactSet:
         else:
             self._mu_base_pair = np.zeros(0)
         self._mu_pair = self._mu_base_pair / self.reduction
-
-    def set_friction_angle(self, friction_angle, triangles: np.ndarray | None = None) -> None:
-        """Shorthand for :meth:`set_friction` with angles [deg]."""
-        self.set_friction(friction_angle=friction_angle, triangles=triangles)
 
     # ------------------------------------------------------------------ search
     def search(self, x: np.ndarray) -> None:
@@ -733,7 +720,7 @@ class ContactSet:
             "broken": self._broken.copy(), "any_broken": bool(self._any_broken), "bond": self._bond.copy(),
             "is_contactor": self._is_contactor.copy(), "any_extra_contactor": bool(self._any_extra_contactor),
             "n_inelastic_seen": int(self._n_inelastic_seen), "mu_tri": self.mu_tri.copy(),
-            "crack_mu": self._crack_mu.copy(), "reduction": float(self._reduction),
+            "crack_mu": self._crack_mu.copy(), "reduction": float(self.interfaces.reduction),
             "x_search": None if self._x_search is None else self._x_search.copy(),
             "needs_search": bool(self._needs_search), "n_searches": int(self.n_searches),
             "e_normal": float(self._e_normal), "e_tangential": float(self._e_tangential),
@@ -744,7 +731,7 @@ class ContactSet:
             d["pair" + name if name[0] == "_" else name] = np.array(getattr(self, name), copy=True)
         return d
 
-    def load_state_dict(self, d: dict) -> None:
+    def load_state_dict(self, d: dict, x=None) -> None:
         """Restore :meth:`state_dict` output (the active contactor list and slots are rebuilt)."""
         n_tri = self.topology.n_triangles
         if d.get("kind", type(self).__name__) != type(self).__name__ or int(d["n_triangles"]) != n_tri:
@@ -758,7 +745,8 @@ class ContactSet:
         self._n_inelastic_seen = int(d["n_inelastic_seen"])
         self.mu_tri[:] = d["mu_tri"]
         self._crack_mu[:] = d["crack_mu"]
-        self._reduction = float(d["reduction"])
+        if self.cracks is None:  # else the crack set restores the factor they share
+            self.interfaces.restore_reduction(float(d["reduction"]))
         for name in self._PAIR_STATE:
             setattr(self, name, np.array(d["pair" + name if name[0] == "_" else name], copy=True))
         self._witness = np.zeros(len(self.pairs), np.uint8)   # a cache: zeros are valid

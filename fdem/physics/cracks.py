@@ -1,4 +1,7 @@
-"""Cohesive crack elements: property sets, validation, heterogeneity and the force provider.
+"""Cohesive crack elements: :class:`CrackSet`, the force provider that hosts the crack law.
+
+Property sets are :mod:`fdem.physics.crack_properties`, random strengths
+:mod:`fdem.physics.heterogeneity`, the strength-reduction factor :mod:`fdem.physics.interfaces`.
 
 The law (per integration point; Munjiza 2004 ch. 7; Munjiza, Andrews & White 1999; Lisjak et
 al. 2014) lives in :func:`fdem.kernels.cracks.point_law` and is derived in ``docs/cohesive.md``:
@@ -311,16 +314,6 @@ class CrackSet:
         self._elastic_only = bool(on)
         self._fill_constants()
 
-    def scale_strength(self, factor: float) -> None:
-        """Shorthand for ``interfaces.set_reduction(1 / factor)``: ``c``, ``tan(phi)``, the
-        residual and contact friction (and ``f_t`` by default) become ``factor`` times their
-        initial values (absolute, not cumulative). Fracture energies and penalties are kept;
-        damage already done stays at its secant stiffness. Only the numbers in the
-        per-element constant rows change."""
-        if not (math.isfinite(factor) and factor > 0):
-            raise ValueError(f"strength factor must be positive and finite, got {factor}")
-        self.interfaces.set_reduction(1.0 / factor)
-
     @property
     def strength_factor(self) -> float:
         """``1 / F``, the multiplier on ``c`` and ``tan(phi)`` (see :mod:`fdem.interfaces`)."""
@@ -553,7 +546,7 @@ class CrackSet:
             "events": self.events.copy(), "time": float(self._time),
             "last_step": None if self._last_step is None else int(self._last_step),
             "elastic_only": bool(self._elastic_only), "active": self._active.copy(),
-            "reduction": float(self.interfaces._reduction),
+            "reduction": float(self.interfaces.reduction),
             "strength_multiplier": self.strength_multiplier.copy(),
             "x_last": None if self._x_last is None else np.array(self._x_last, dtype=np.float64),
         }
@@ -595,7 +588,7 @@ class CrackSet:
         self._time = float(d["time"])
         self._last_step = None if d["last_step"] is None else int(d["last_step"])
         self._elastic_only = bool(d["elastic_only"])
-        self.interfaces._reduction = float(d["reduction"])
+        self.interfaces.restore_reduction(float(d["reduction"]))
         if self.scheme == "gather":
             self._fe[:] = d["fe"]
         if x is not None:

@@ -116,6 +116,11 @@ class Interfaces:
         for fn in self._listeners:
             fn()
 
+    def restore_reduction(self, factor: float) -> None:
+        """Put back a saved ``F`` without checks or notices (a restart: the subscribers restore
+        their own state, which already holds the values that depend on ``F``)."""
+        self._reduction = float(factor)
+
     # ------------------------------------------------------------------ friction
     def residual_mu(self, tags: np.ndarray) -> np.ndarray:
         """Reduced residual friction coefficients ``tan(phi_res) / F`` of interfaces ``tags``."""

@@ -24,6 +24,9 @@ velocities at ``n - 1/2``). Optional methods the solver uses when present:
   ``p``; combined with the triangles' as ``1 / sqrt(sum 1 / dt_i^2)``;
 * ``crack_fields() -> dict[str, ndarray]``: (n_crack,) arrays (``damage``, ``broken``, ...)
   written on the crack line cells.
+* ``state_dict() -> dict`` and ``load_state_dict(d, x)``: what a checkpoint holds of the
+  provider, and its restore (``x`` the restored positions, for providers that keep a
+  reference to them).
 
 Energy ledger
 -------------
@@ -719,10 +722,5 @@ class Simulation:
         g = d["good"]
         self._good = State(np.array(g["x"], dtype=np.float64), np.array(g["v"], dtype=np.float64), st.mass,
                            float(g["time"]), int(g["step"]))
-        import inspect
-
-        for p, s in zip(self.providers, saved):
-            if "x" in inspect.signature(p.load_state_dict).parameters:
-                p.load_state_dict(s, x=st.x)
-            else:
-                p.load_state_dict(s)
+        for p, s in zip(self.providers, saved):  # every provider: load_state_dict(d, x), x the restored positions
+            p.load_state_dict(s, x=st.x)

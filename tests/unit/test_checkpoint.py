@@ -37,7 +37,7 @@ def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "c
     cracks = CrackSet(topo, {0: rock}, contact_penalty=1e10, scheme=scheme, parallel_min=0)
     contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
     if reduce:
-        cracks.scale_strength(0.8)
+        cracks.interfaces.set_reduction(1 / 0.8)
     sim = Simulation(model, providers=[cracks, contact], progress=False)
     return sim, cracks, contact
 

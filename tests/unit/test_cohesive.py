@@ -335,10 +335,10 @@ def test_bad_input_is_rejected_with_clear_errors():
     with pytest.raises(ValueError, match="distribution"):
         Heterogeneity(distribution="lognormal")
     cs = CrackSet(topo, {0: props()})
-    with pytest.raises(ValueError, match="strength factor"):
-        cs.scale_strength(-1.0)
+    with pytest.raises(ValueError, match="must be positive and finite"):
+        cs.interfaces.set_reduction(-1.0)
     with pytest.raises(ValueError, match="smallest admissible G_I"):
-        cs.scale_strength(1e3)  # a stronger rock would snap back with this G_I
+        cs.interfaces.set_reduction(1e-3)  # a stronger rock (F = 1e-3) would snap back with this G_I
 
 
 # ----------------------------------------------------------------------------- run-time strength
@@ -346,12 +346,12 @@ def test_strength_reduction_scales_f_t_c_and_tan_phi():
     p = props()
     factor = 0.6
     dr = Driver(p)
-    dr.cs.scale_strength(factor)
+    dr.cs.interfaces.set_reduction(1 / factor)
     assert dr.cs.strength_factor == factor
     peak = max(dr.move(o, 0.0)[0] for o in np.linspace(0, 2 * p.f_t / KN, 400)[1:])
     assert peak == pytest.approx(factor * p.f_t, rel=5e-3)
     dr = Driver(p)
-    dr.cs.scale_strength(factor)
+    dr.cs.interfaces.set_reduction(1 / factor)
     sigma_n = 2e6
     o_c = -sigma_n / KN
     dr.move(o_c, 0.0)

@@ -270,7 +270,7 @@ def test_broken_joint_friction_belongs_to_the_interface_and_is_reduced():
     q = pair_index()[(min(a, b), max(a, b))]
     t25, t35, t40 = (np.tan(np.radians(d)) for d in (25.0, 35.0, 40.0))
     assert cs._mu_pair[q] == pytest.approx(t25)
-    cs.set_reduction(1.5)
+    cs.interfaces.set_reduction(1.5)
     assert cs._mu_pair[q] == pytest.approx(t25 / 1.5)
     # a later breakage with higher friction neither overwrites nor escapes the reduction
     cs.activate_cracks([0], friction_angle=[35.0])
@@ -284,7 +284,7 @@ def test_broken_joint_friction_belongs_to_the_interface_and_is_reduced():
     with pytest.raises(ValueError, match="mu"):
         cs.activate_cracks([0], mu=-0.1)
     with pytest.raises(ValueError, match="positive"):
-        cs.set_reduction(0.0)
+        cs.interfaces.set_reduction(0.0)
 
 
 def test_single_intact_body_is_dormant():

@@ -165,7 +165,7 @@ def test_psi_zero_is_the_law_without_dilation():
     for k, s in enumerate(np.linspace(0, 4e-5, 400)):
         o = -2e-6 + 1e-6 * math.sin(k / 20)
         tr.append(dr.move(o, s, 0.7 * o, 0.9 * s))
-    dr.cs.scale_strength(0.7)
+    dr.cs.interfaces.set_reduction(1 / 0.7)
     for k, s in enumerate(np.linspace(4e-5, -1e-5, 300)):
         tr.append(dr.move(1e-6 * math.sin(k / 10), s))
     tr = np.array(tr)
@@ -204,7 +204,7 @@ def test_strength_reduction_keeps_dilation_and_the_books():
     for si in np.linspace(0, s, 1000)[1:]:
         dr.move(o, si)
     before = ledger(dr)
-    dr.cs.scale_strength(0.8)
+    dr.cs.interfaces.set_reduction(1 / 0.8)
     assert ledger(dr) == pytest.approx(before, rel=1e-12)
     assert dr.cs._dil[0, CD_TANPSI] == tanpsi
     # Further slip: the confinement still grows at Kc tan(psi) per unit plastic slip.
@@ -213,14 +213,14 @@ def test_strength_reduction_keeps_dilation_and_the_books():
     dkap = 1e-6 - (tau_b - tau_a) / KT
     assert (sig_a - sig_b) / dkap == pytest.approx(KN * tanpsi, rel=1e-9)
     # F = 4: tan(phi)/F = 0.144 < tan(psi) = 0.176: capped, the sliding dissipation stays >= 0.
-    dr.cs.scale_strength(0.25)
+    dr.cs.interfaces.set_reduction(1 / 0.25)
     assert dr.cs._dil[0, CD_TANPSI] == pytest.approx(0.25 * tanphi, rel=1e-12)
     fr = dr.cs.dissipated[0, CW_FRICTION]
     for si in np.linspace(s + 2e-6, s + 2e-5, 200)[1:]:
         dr.move(o, si)
         assert dr.cs.dissipated[0, CW_FRICTION] >= fr
         fr = dr.cs.dissipated[0, CW_FRICTION]
-    dr.cs.scale_strength(1.0)
+    dr.cs.interfaces.set_reduction(1 / 1.0)
     assert dr.cs._dil[0, CD_TANPSI] == tanpsi
 
 
@@ -230,7 +230,7 @@ def test_checkpoint_round_trip_keeps_the_dilation():
     o = -SIGMA_N0 / KN
     for s in np.linspace(0, 3e-5, 300):
         a.move(o, s)
-    a.cs.scale_strength(0.25)
+    a.cs.interfaces.set_reduction(1 / 0.25)
     b.cs.load_state_dict(a.cs.state_dict())
     b.step = a.step
     assert np.array_equal(b.cs._dil, a.cs._dil)

@@ -40,7 +40,7 @@ def test_strength_change_keeps_the_secant_and_books_what_it_releases(factor):
     assert 0.0 < dr.cs.damage[0] < 1.0
     sig_before = dr.move(dr.x_prev[dr.cn[3], 1] * -1.0, 0.0)[0]  # same opening, traction now
     e0, d0 = stored_and_spent(dr)
-    dr.cs.scale_strength(factor)
+    dr.cs.interfaces.set_reduction(1 / factor)
     e1, d1 = stored_and_spent(dr)
     # Stronger (factor > 1): the state lies inside the new envelope, nothing changes.
     # Weaker: the end softens at fixed opening; the stored energy it loses is dissipated.
@@ -83,7 +83,7 @@ def test_reduction_below_the_traction_of_a_sliding_element_books_the_slip():
     for s in np.linspace(0, 1.2 * f_s / KT, 200)[1:]:
         dr.move(o_c, s)
     e0, d0 = stored_and_spent(dr)
-    dr.cs.scale_strength(0.5)
+    dr.cs.interfaces.set_reduction(1 / 0.5)
     e1, d1 = stored_and_spent(dr)
     assert e1 < e0
     assert e1 + d1 == pytest.approx(e0 + d0, rel=1e-12)

@@ -172,7 +172,7 @@ def test_extreme_penalties_shrink_the_step_or_let_bodies_interpenetrate_but_stay
 # ----------------------------------------------------------------------------- fragmentation
 def test_sudden_mass_fragmentation_of_a_loaded_block():
     """A block hanging from its top under gravity, in static equilibrium with pre-loaded crack
-    elements, loses 99.9 % of its strength at once (scale_strength(1e-3)): every element goes
+    elements, loses 99.9 % of its strength at once (interfaces.set_reduction(1e3)): every element goes
     over its strength together, a band of elements breaks through (6 of 92 on this
     mesh), hands its faces to contact, and the block below falls. The run
     stays finite and the ledger (released elastic energy included) closes, or the guard stops it."""
@@ -187,7 +187,7 @@ def test_sudden_mass_fragmentation_of_a_loaded_block():
     sim = Simulation(model, providers=[cracks, contact], progress=False)
     sim.run(n_steps=200, history_every=20, output_every=10**9)
     assert cracks.broken.sum() == 0 and sim.history[-1]["max_displacement"] < 1e-6
-    cracks.scale_strength(1e-3)
+    cracks.interfaces.set_reduction(1 / 1e-3)
     try:
         sim.run(n_steps=3000, history_every=20, output_every=10**9)
     except InstabilityError as e:
