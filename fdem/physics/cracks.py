@@ -361,11 +361,6 @@ class CrackSet:
             off[:, K.CO_S0 + K.CO_END * e] = ft / (self.kt * w)
         self._offset[:] = off[self._perm]
 
-    @property
-    def preload_offsets(self) -> np.ndarray:
-        """(n, 4) separation offsets ``[o0, s0, o1, s1]`` [m] (topology order; zero unless pre-loaded)."""
-        return self._offset[self._inv].copy()
-
     # ------------------------------------------------------------------ active list
     def _set_active(self, alive: np.ndarray) -> None:
         """``alive``: sorted internal ids of the live elements (colour-major already)."""

@@ -17,8 +17,8 @@ numbers to the last bit.
 * :func:`periodic` and :func:`chain`: ``Simulation.run(..., stop_when=...)`` calls
   ``stop_when(sim)`` on every history row; ``periodic(path, every_steps)`` is such a callable
   that writes a checkpoint when due and never stops the run, and ``chain`` combines it with a
-  stage's own end rule. The stage runner uses them through :func:`checkpointed_run`, which
-  also writes a checkpoint at the end of every stage.
+  stage's own end rule; :func:`checkpointed_run` runs with both and writes a checkpoint at the
+  end. They are building blocks: no stage runner or case calls them yet (the tests do).
 * :func:`continue_run`: finishes a run that a periodic checkpoint interrupted with the same
   step sequence (history steps and time step) as the uninterrupted run.
 
