@@ -10,6 +10,9 @@ to ``<out>/summary.json``) and accepts at least:
                      (the summary then says ``"time_capped": true``; a capped run is a smoke
                      run, its physical figures are not converged)
 ``--no-pictures``    no PNG files (VTU series, ``history.csv`` and ``summary.json`` still written)
+``--density-scaling B``  added-mass budget of the density-scaled quasi-static stages, a fraction
+                     of the model's mass (default 0.01; 0 runs every stage on the real masses;
+                     :mod:`fdem.solve.density_scaling`)
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ import sys
 from pathlib import Path
 
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
-           "stop_cleanly_on_signals"]
+           "stop_cleanly_on_signals", "use_density_scaling"]
 
 SMALL_MESH_TRIANGLES = 20_000
 """Below this many triangles a case runs on one Numba thread unless ``--threads`` (or
@@ -44,6 +47,9 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on the simulated time of the whole run [s] (a smoke run)")
     parser.add_argument("--no-pictures", action="store_true", help="write no PNG pictures")
+    parser.add_argument("--density-scaling", type=float, default=0.01, metavar="BUDGET",
+                        help="added-mass budget of the density-scaled quasi-static stages, a fraction of the "
+                             "model's mass (default 0.01; 0: real masses in every stage)")
     return parser
 
 
@@ -57,6 +63,9 @@ def check_common(parser: argparse.ArgumentParser, args) -> None:
         parser.error(f"--threads must be at least 1, got {args.threads}")
     if args.max_time is not None and not (math.isfinite(args.max_time) and args.max_time > 0):
         parser.error(f"--max-time must be a positive number of seconds, got {args.max_time}")
+    budget = getattr(args, "density_scaling", 0.0)
+    if not (math.isfinite(budget) and 0.0 <= budget <= 1.0):
+        parser.error(f"--density-scaling must be a fraction of the model's mass in [0, 1], got {budget}")
 
 
 def set_threads(n: int | None) -> None:
@@ -114,3 +123,9 @@ def cap_simulated_time(sim, t_max: float | None) -> None:
 def time_capped(sim) -> bool:
     """True when ``sim`` ran up to its ``--max-time`` cap (:attr:`Simulation.time_capped`)."""
     return sim.time_capped
+
+
+def use_density_scaling(sim, budget: float | None) -> None:
+    """Run the quasi-static stages of ``sim`` density-scaled within ``budget`` (``--density-scaling``;
+    0 or ``None``: on the real masses throughout)."""
+    sim.density_scaling = budget or None

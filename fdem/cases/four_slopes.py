@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
 
 import math
 from fdem.mesh.topology import INTACT
@@ -251,6 +251,7 @@ def main(argv=None) -> dict:
         toe_x, toe_y = slope_toe(geometry.bodies[0])
         run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
         cap_simulated_time(sim, args.max_time)
+        use_density_scaling(sim, args.density_scaling)
         print(f"time step {sim.dt:.3g} s (critical limits: "
               + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
         t1 = time.perf_counter()

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
 
 from fdem.geometry.joint_sets import SegmentSet
 from fdem.geometry.section import Geometry
@@ -184,6 +184,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
     stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     cap_simulated_time(sim, args.max_time)
+    use_density_scaling(sim, args.density_scaling)
     topo = sim.model.topology
     threads = threads_for_mesh(args.threads, topo.n_triangles)
     print(f"[{spacing_rule}] {topo.n_triangles} triangles, {topo.n_cracks} crack elements "

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
 
 __all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
            "FOS_BRACKET", "geometry", "property_sets", "build", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
@@ -136,6 +136,7 @@ def main(argv=None) -> dict:
     toe_x, toe_y = slope_toe(geo.bodies[0])
     report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
     cap_simulated_time(sim, args.max_time)
+    use_density_scaling(sim, args.density_scaling)
     threads = threads_for_mesh(args.threads, sim.model.topology.n_triangles)
     print(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
           f"time step {sim.dt:.3g} s, {threads} thread(s)")

@@ -80,7 +80,7 @@ __all__ = ["EM_A", "EM_B", "EM_C", "MUNJIZA", "LINEAR", "N_CONST", "N_STATE", "N
            "UNKNOWN_TRACTION", "PARALLEL_MIN", "softening", "point_law", "element_update",
            "update_and_scatter", "crack_forces_coloured", "crack_forces_serial", "crack_forces_store",
            "gather_node_forces", "colour_elements", "end_separations", "crack_elastic_energy",
-           "stable_dt_kernel", "secant_stiffness", "remap_damage", "project_to_envelope"]
+           "node_spring_stiffness", "stable_dt_kernel", "secant_stiffness", "remap_damage", "project_to_envelope"]
 
 
 # Evans-Marathe softening constants used by Munjiza (2004, ch. 7): a, b, c.
@@ -615,16 +615,24 @@ def crack_elastic_energy(x, nodes, const, state, offset, active):
 
 
 @njit(cache=True)
-def stable_dt_kernel(mass, nodes, const, active, n_nodes):
-    """Critical step of the crack springs: ``dt = min 2 / sqrt(K_a/m_a + K_b/m_b)`` over the
-    node pairs of live elements, where ``K_node`` sums ``max(Kn, Kt, Kc)`` of the (<= 2) elements
-    on the node (a Gershgorin bound on the highest frequency of the crack springs alone)."""
+def node_spring_stiffness(nodes, const, active, n_nodes):
+    """(n_nodes,) ``K_node = sum max(Kn, Kt, Kc)`` [N/m] over the ends of live elements on each
+    node (a node is an end of at most 2 elements): the stiffest spring each node carries."""
     K = np.zeros(n_nodes)
     for j in range(active.shape[0]):
         c = active[j]
         k = max(const[c, CC_KN], const[c, CC_KT], const[c, CC_KC])
         for q in range(4):
             K[nodes[c, q]] += k
+    return K
+
+
+@njit(cache=True)
+def stable_dt_kernel(mass, nodes, const, active, n_nodes):
+    """Critical step of the crack springs: ``dt = min 2 / sqrt(K_a/m_a + K_b/m_b)`` over the
+    node pairs of live elements, where ``K_node`` sums ``max(Kn, Kt, Kc)`` of the (<= 2) elements
+    on the node (a Gershgorin bound on the highest frequency of the crack springs alone)."""
+    K = node_spring_stiffness(nodes, const, active, n_nodes)
     dt = np.inf
     for j in range(active.shape[0]):
         c = active[j]

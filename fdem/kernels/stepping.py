@@ -122,11 +122,12 @@ def constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, 
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
+def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
                  f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger):
     """Central-difference update of node ``i`` given the force ``(fx, fy)`` of its triangle(s).
 
-    Adds gravity ``m g``, the interaction force (if ``use_int``) and the external load (if
+    ``gmass`` is the node's gravitational mass, ``mass`` (``1 / inv_mass``) its inertial mass:
+    the same but in a density-scaled stage (:mod:`fdem.solve.density_scaling`). Adds gravity ``gmass g``, the interaction force (if ``use_int``) and the external load (if
     ``use_ext``), applies damping (if ``damped``) and the prescribed velocities of ``flags``,
     writes ``v[i]`` and ``x[i]``. Returns ``(v_new_x, v_new_y, kinetic, gravity_moment,
     external_moment, damping_early, damping_late, reaction_early, reaction_late,
@@ -136,8 +137,8 @@ def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_d
     """
     px, py = x[i, 0], x[i, 1]
     ux, uy = v[i, 0], v[i, 1]
-    fx += mass * gx
-    fy += mass * gy
+    fx += gmass * gx
+    fy += gmass * gy
     h = 0.5 * dt
     ie = 0.0
     il = 0.0
@@ -175,7 +176,7 @@ def advance_node(x, v, i, fx, fy, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_d
     gmom = 0.0
     emom = 0.0
     if ledger:
-        gmom = mass * (gx * px + gy * py)
+        gmom = gmass * (gx * px + gy * py)
         emom = ex * px + ey * py
     return nx, ny, kinetic, gmom, emom, de, dl, re, rl, ie, il
 
@@ -192,15 +193,17 @@ def n_blocks(n: int) -> int:
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
 def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
-                  gx, gy, dt, alpha, local, use_viscous, ledger, partial):
+                  gx, gy, dt, alpha, local, use_viscous, ledger, partial, inertia):
     """One fused step on an exploded mesh (node ``3t + k`` is corner ``k`` of triangle ``t``).
 
     Each triangle computes its forces and advances its own three nodes: race-free, one pass
     over memory. ``alpha`` [1/s] and ``local`` [-] are the damping coefficients (both 0: no
     damping code runs); ``ledger`` asks for the state energies (strain, kinetic, moments),
     which cost a little and are only needed on output steps. ``partial`` is a work array of
-    shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. Returns the sums named in
-    :data:`LEDGER_FIELDS` (state energies 0 unless ``ledger``).
+    shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia`` (n_nodes,) gives the nodes'
+    inertial masses of a density-scaled stage, or ``None`` (the triangles' own lumped masses;
+    gravity always acts on those). Returns the sums named in :data:`LEDGER_FIELDS` (state
+    energies 0 unless ``ledger``).
     """
     c_keep = 1.0 - 0.5 * alpha * dt
     c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
@@ -228,9 +231,10 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
                                   v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1],
                                   use_viscous)
             m = tc[t, TC_MASS]
-            im = tc[t, TC_INV_MASS]
             for k in range(3):  # one inlined call site keeps the compile time down
-                a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, im, gx, gy, dt, alpha, c_keep, c_div,
+                mi = m if inertia is None else inertia[i + k]
+                im = tc[t, TC_INV_MASS] if inertia is None else 1.0 / mi
+                a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
                                  local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
                 kin += a[2]
                 if ledger:
@@ -268,17 +272,18 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node_elastic(x, v, i, px, py, fx, fy, mass, inv_mass, gx, gy, dt, damping, flags, v_prescribed):
+def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damping, flags, v_prescribed):
     """Lean :func:`advance_node`: gravity, optional damping (``damping = (alpha, local)`` or
     ``None``) and constraints; no external loads, no state energies. ``(px, py) = x[i]``,
-    passed in because the caller has it in registers.
+    passed in because the caller has it in registers; ``gmass`` the gravitational and ``mass``
+    the inertial mass (different in a density-scaled stage).
 
     Returns ``(reaction_early, reaction_late, v_new_x, v_new_y, v_old_x, v_old_y,
     damping_early, damping_late)`` [J/m, m/s].
     """
     ux, uy = v[i, 0], v[i, 1]
-    fx += mass * gx
-    fy += mass * gy
+    fx += gmass * gx
+    fy += gmass * gy
     h = 0.5 * dt
     if damping is not None:
         alpha = damping[0]
@@ -297,10 +302,11 @@ def advance_node_elastic(x, v, i, px, py, fx, fy, mass, inv_mass, gx, gy, dt, da
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
-def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial):
+def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia):
     """Fast path of :func:`step_exploded`: elastic triangles, gravity, interaction forces
     (``f_int`` an array, or ``None`` when there are no providers), damping (``(alpha, local)``
-    or ``None``) and constraints; no viscosity, external loads or state energies. ``None``
+    or ``None``), inertial masses of a density-scaled stage (``inertia`` (n_nodes,) or ``None``)
+    and constraints; no viscosity, external loads or state energies. ``None``
     arguments compile to specialisations without that code (numba prunes the branches).
 
     Returns ``(reaction_early, reaction_late, interaction_early, interaction_late,
@@ -348,13 +354,19 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
                 e2x += g2x
                 e2y += g2y
             m = tc[t, TC_MASS]
-            im = tc[t, TC_INV_MASS]
-            a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, im, gx, gy, dt, damping, flags, v_prescribed)
-            b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, im, gx, gy, dt, damping, flags, v_prescribed)
-            c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, im, gx, gy, dt, damping, flags, v_prescribed)
+            if inertia is None:
+                ma = mb = mc = m
+                ia = ib = ic = tc[t, TC_INV_MASS]
+            else:
+                ma, mb, mc = inertia[i], inertia[i + 1], inertia[i + 2]
+                ia, ib, ic = 1.0 / ma, 1.0 / mb, 1.0 / mc
+            a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damping, flags, v_prescribed)
+            b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damping, flags, v_prescribed)
+            c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damping, flags, v_prescribed)
             r_e += a[0] + b[0] + c[0]
             r_l += a[1] + b[1] + c[1]
-            kin += 0.5 * m * (a[2] * a[4] + a[3] * a[5] + b[2] * b[4] + b[3] * b[5] + c[2] * c[4] + c[3] * c[5])
+            kin += 0.5 * (ma * (a[2] * a[4] + a[3] * a[5]) + mb * (b[2] * b[4] + b[3] * b[5])
+                          + mc * (c[2] * c[4] + c[3] * c[5]))
             if damping is not None:
                 d_e += a[6] + b[6] + c[6]
                 d_l += a[7] + b[7] + c[7]
@@ -453,7 +465,7 @@ def node_pass(x, v, mass, node_corner_ptr, node_corners, corner_force,
             fx += corner_force[c, 0]
             fy += corner_force[c, 1]
         m = mass[i]
-        a = advance_node(x, v, i, fx, fy, m, 1.0 / m, gx, gy, dt, alpha, c_keep, c_div, local, damped,
+        a = advance_node(x, v, i, fx, fy, m, m, 1.0 / m, gx, gy, dt, alpha, c_keep, c_div, local, damped,
                          f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
         s2 += a[2]
         s3 += a[3]

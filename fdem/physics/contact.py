@@ -680,6 +680,19 @@ class ContactSet:
         omega2 = 6.0 * self.penalty * self._edge_max / self._altitude * max(1.0, self.tangential_ratio) / m
         return float(2.0 / np.sqrt(omega2.max()))
 
+    def nodal_stiffness(self, mass: np.ndarray) -> np.ndarray:
+        """(n_nodes,) stiffness ``S`` [N/m] for which each node must carry mass: contact alone is
+        stable at a step ``dt`` when every node mass ``m >= S dt^2 / 4``.
+
+        The per-triangle bound of :meth:`stable_dt`, ``omega^2 = 6 p L / (h m_min) max(1, r_t)``,
+        written as the stiffness ``S = omega^2 m_min`` on each of the triangle's three nodes (at
+        the lightest node it gives back :meth:`stable_dt`)."""
+        mass = np.asarray(mass, dtype=np.float64)
+        if mass.shape != (self.topology.n_nodes,):
+            raise ValueError(f"mass must have shape ({self.topology.n_nodes},), got {mass.shape}")
+        s = 6.0 * self.penalty * self._edge_max / self._altitude * max(1.0, self.tangential_ratio)
+        return np.repeat(s, 3)
+
     # ------------------------------------------------------------------ checks
     def check_reference_overlap(self, x: np.ndarray, rel_tol: float = 1e-8) -> None:
         """Raise ``ValueError`` if any two contactor triangles overlap at positions ``x``

@@ -32,6 +32,9 @@ class EnergyLedger:
         # Potential energy added by changing gravity at fixed positions (Simulation.set_gravity):
         # work done on the system by whoever changes g, booked like boundary work.
         self.gravity_change_work = 0.0
+        # Kinetic energy added by changing the inertial masses at fixed velocities
+        # (Simulation.set_density_scaling), booked the same way.
+        self.mass_change_work = 0.0
         self.first_early: dict[str, float] | None = None
         self.total0: float | None = None
         self.scale = 0.0
@@ -61,11 +64,14 @@ class EnergyLedger:
         spent = row["damping_dissipation"] + row["viscous_dissipation"]
         interactions = sum(provider_terms.values()) if providers_complete else -row["interaction_work"]
         row["gravity_change_work"] = self.gravity_change_work
-        total = held + spent + interactions - row["boundary_work"] - self.gravity_change_work
+        row["mass_change_work"] = self.mass_change_work
+        total = (held + spent + interactions - row["boundary_work"] - self.gravity_change_work
+                 - self.mass_change_work)
         if self.total0 is None:
             self.total0 = total
         size = (abs(row["kinetic"]) + abs(row["strain"]) + abs(row["gravity_potential"]) + abs(row["load_potential"])
                 + abs(spent) + abs(row["boundary_work"]) + abs(self.gravity_change_work)
+                + abs(self.mass_change_work)
                 + sum(abs(t) for t in provider_terms.values()))
         self.scale = max(self.scale, size, self.roundoff)
         row["total"] = total

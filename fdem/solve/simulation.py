@@ -59,6 +59,7 @@ from fdem.io import npz as npz
 from fdem.io import history as history_file
 from fdem.physics import elastic as elastic
 from fdem.solve.damping import Damping, NO_DAMPING
+from fdem.solve import density_scaling
 from fdem.solve.ledger import EnergyLedger, work_halves
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation"]
@@ -162,13 +163,25 @@ class Simulation:
     compression : ``None`` (raw, default: fastest to write), ``"zlib"`` or ``"lzma"``
         Block compression of every VTU frame (``docs/outputs.md``: zlib keeps 62 % of the bytes
         of a 180k-triangle frame at about 13 times the write time).
+    density_scaling : float or None
+        Added-mass budget of density-scaled quasi-static stages, a fraction of the model's mass
+        (default 0.01, :mod:`fdem.solve.density_scaling`); ``None`` or 0 keeps the real masses
+        in every stage. Stages switch scaling on and off (:func:`fdem.workflow.stages.run_stage`,
+        :meth:`set_density_scaling`); an exploded mesh and an automatic time step are needed.
     """
 
     def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
-                 output_fields=None, compression: str | None = None, time_cap: float | None = None):
+                 output_fields=None, compression: str | None = None, time_cap: float | None = None,
+                 density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
+        if density_scaling is not None and not (math.isfinite(density_scaling) and 0.0 <= density_scaling <= 1.0):
+            raise ValueError(f"density_scaling (added-mass budget, a fraction of the model's mass) must lie in "
+                             f"[0, 1] or be None, got {density_scaling!r}")
+        self.density_scaling = density_scaling or None
+        self.inertia: np.ndarray | None = None  # inertial node masses while density-scaled, else None
+        self._scaled_dt = math.inf
         self.model = model
         self.dt_fraction = dt_fraction
         self.time_cap = time_cap
@@ -254,7 +267,10 @@ class Simulation:
         self.monitors[name] = fn
 
     def critical_dt(self) -> tuple[float, dict[str, float]]:
-        """The critical (stability limit) step [s] and the limits it combines, by source."""
+        """The critical (stability limit) step [s] and the limits it combines, by source (while
+        density-scaled: the step the scaled masses were chosen for)."""
+        if self.inertia is not None:
+            return self._scaled_dt, {"density-scaled nodes": self._scaled_dt}
         limits = {"triangles": self.triangle_dt}
         for p in self.providers:
             fn = getattr(p, "stable_dt", None)
@@ -294,6 +310,43 @@ class Simulation:
         self.ledger.gravity_moment0 = float((m * g_new * self.x0).sum())
         self.gravity = g_new
 
+    # ------------------------------------------------------------------ density scaling
+    @property
+    def density_scaled(self) -> bool:
+        """True while the nodes carry density-scaled inertial masses."""
+        return self.inertia is not None
+
+    @property
+    def period_stretch(self) -> float:
+        """How much longer the fundamental period is on the current inertial masses [-]
+        (1 unscaled; :func:`fdem.solve.density_scaling.period_stretch`)."""
+        if self.inertia is None:
+            return 1.0
+        return density_scaling.period_stretch(self.state.mass, self.inertia)
+
+    def set_density_scaling(self, on: bool, book: bool = True) -> bool:
+        """Switch density scaling on (a quasi-static stage) or off (a dynamic one); returns
+        whether it is on. Switched on, the nodes get the inertial masses
+        :func:`~fdem.solve.density_scaling.inertial_masses` of the largest critical step whose
+        added mass stays within the :attr:`density_scaling` budget, and the time step follows
+        (``dt_fraction`` of that step). It stays off without a budget, with a user time step or
+        on a conforming mesh. The kinetic-energy change at fixed velocities is booked in the
+        ledger as ``mass_change_work`` (``book=False``: a restart that restores it instead)."""
+        old = self.inertia
+        if on and self.density_scaling and self.user_dt is None and self.exploded:
+            mass = self.state.mass
+            stiffness = density_scaling.nodal_stiffness(self.model, self.providers, mass)
+            self._scaled_dt = density_scaling.scaled_critical_step(mass, stiffness, self.density_scaling)
+            self.inertia = density_scaling.inertial_masses(mass, stiffness, self._scaled_dt)
+        else:
+            self.inertia = None
+        if book and (old is not None or self.inertia is not None):
+            before = self.state.mass if old is None else old
+            after = self.state.mass if self.inertia is None else self.inertia
+            self.ledger.mass_change_work += 0.5 * float(((after - before) * (self.state.v ** 2).sum(1)).sum())
+        self.dt = self._choose_dt()
+        return self.inertia is not None
+
     @property
     def time_capped(self) -> bool:
         """True when the run has reached its :attr:`time_cap`: a stage that ended there says
@@ -329,7 +382,7 @@ class Simulation:
             # fast path (most steps of a dynamic or damped stage): no state energies needed
             r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
                 x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
-                self.flags, self.v_prescribed, gx, gy, dt, self._partial)
+                self.flags, self.v_prescribed, gx, gy, dt, self._partial, self.inertia)
             sums = StepSums(strain=0.0, kinetic=kin, gravity_moment=0.0, external_moment=0.0,
                             damping_early=d_e, damping_late=d_l, viscous_early=0.0, viscous_late=0.0,
                             reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
@@ -337,7 +390,7 @@ class Simulation:
         elif self.exploded:
             sums = StepSums._make(step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
                                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous,
-                                                ledger, self._partial))
+                                                ledger, self._partial, self.inertia))
         else:
             ptr, corners = self._csr
             strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
@@ -667,7 +720,9 @@ class Simulation:
                        "total0": led.total0, "scale": float(led.scale), "last": dict(led.last),
                        "gravity_moment0": float(led.gravity_moment0),
                        "external_moment0": float(led.external_moment0),
-                       "gravity_change_work": float(led.gravity_change_work)},
+                       "gravity_change_work": float(led.gravity_change_work),
+                       "mass_change_work": float(led.mass_change_work)},
+            "density_scaled": self.inertia is not None,
             "kinetic_peak": float(self.kinetic_peak),
             "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
             "provider_terms": [dict(terms), bool(complete)],
@@ -711,6 +766,7 @@ class Simulation:
         led.gravity_moment0 = float(s["gravity_moment0"])
         led.external_moment0 = float(s["external_moment0"])
         led.gravity_change_work = float(s.get("gravity_change_work", 0.0))
+        led.mass_change_work = float(s.get("mass_change_work", 0.0))
         self.kinetic_peak = float(d.get("kinetic_peak", 0.0))
         self.history[:] = [dict(r) for r in d["history"]]
         self._frames = int(d["frames"])
@@ -724,3 +780,6 @@ class Simulation:
                            float(g["time"]), int(g["step"]))
         for p, s in zip(self.providers, saved):  # every provider: load_state_dict(d, x), x the restored positions
             p.load_state_dict(s, x=st.x)
+        # the scaled masses follow from the restored crack set; the saved step is the one they give
+        self.set_density_scaling(bool(d.get("density_scaled", False)), book=False)
+        self.dt = float(d["dt"])

@@ -113,6 +113,13 @@ class Stage:
     dt_fraction : time-step factor of the stage, the fraction of the critical step (``None``: the
         simulation's ``dt_fraction``; ignored when the simulation has a user time step). The
         simulation's own factor is restored when the stage ends.
+    density_scaling : run the stage on density-scaled inertial masses
+        (:mod:`fdem.solve.density_scaling`, within the simulation's added-mass budget).
+        ``None`` (default): yes for a damped (quasi-static) stage, no for an undamped (dynamic)
+        one, whose inertia is the answer. A scaled stage stretches its time rules (``duration``,
+        ``max_time``, ``check_interval``, ``output_interval``, ``reduction_ramp`` time,
+        ``min_time``, ``hold_for``) by the period stretch and divides its mass-proportional
+        damping by it, so it runs the same number of response times.
     """
 
     name: str
@@ -130,6 +137,7 @@ class Stage:
     output_interval: float | None = None
     monitor: object = None
     dt_fraction: float | None = None
+    density_scaling: bool | None = None
 
     def __post_init__(self):
         if not self.name:
@@ -156,7 +164,8 @@ class Stage:
 
 @dataclass
 class StageResult:
-    """How a stage went. ``reason``: ``converged``, ``failed``, ``capped`` or ``completed``."""
+    """How a stage went. ``reason``: ``converged``, ``failed``, ``capped`` or ``completed``;
+    ``period_stretch`` > 1 when it ran density-scaled (times are then the scaled model's)."""
 
     name: str
     reason: str
@@ -173,6 +182,7 @@ class StageResult:
     max_displacement: float
     n_broken: int
     detail: str = ""
+    period_stretch: float = 1.0
 
     @property
     def converged(self) -> bool:
@@ -240,7 +250,13 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     fail_disp = None
     if fail is not None:
         fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
-    length = stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T)
+    damping = stage.damping
+    quasi_static = damping.mass_proportional != 0.0 or damping.local != 0.0
+    scaled = sim.set_density_scaling(quasi_static if stage.density_scaling is None else stage.density_scaling)
+    stretch = sim.period_stretch  # the stage's time rules in the scaled model's time
+    if scaled and damping.mass_proportional != 0.0:
+        damping = Damping(mass_proportional=damping.mass_proportional / stretch, local=damping.local)
+    length = stretch * (stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T))
     sim_dt_fraction = sim.dt_fraction
     try:
         if stage.dt_fraction is not None:
@@ -250,8 +266,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         sim.dt_fraction = sim_dt_fraction
         raise
     dt = sim.dt
-    check_steps = max(1, int(round((stage.check_interval or T / 40.0) / dt)))
-    output_steps = max(1, int(round((stage.output_interval or length / 4.0) / dt)))
+    check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
+    output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
     if not frames:
         output_steps = 2 ** 62
     t0 = sim.state.time
@@ -259,7 +275,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     x_start = sim.state.x.copy()
     ramp = None
     if stage.reduction_ramp is not None:
-        ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stage.reduction_ramp[1])
+        ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stretch * stage.reduction_ramp[1])
     status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
               "since": None}
     conv = stage.converge
@@ -285,7 +301,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
                 status["reason"] = "failed"
                 status["detail"] = f"speed {speed:.4g} m/s > {fail.speed:.4g} m/s after {t:.4g} s"
                 return True
-        if conv is not None and t >= conv.min_time:
+        if conv is not None and t >= stretch * conv.min_time:
             ok = True
             if conv.speed is not None:
                 ok = speed <= conv.speed
@@ -299,7 +315,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
             else:
                 if status["since"] is None:
                     status["since"] = t
-                if t - status["since"] >= conv.hold_for:
+                if t - status["since"] >= stretch * conv.hold_for:
                     status["reason"] = "converged"
                     status["detail"] = f"after {t:.4g} s"
                     return True
@@ -307,14 +323,14 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
 
     wall = time.perf_counter()
     try:
-        sim.run(t_end=t0 + length, damping=stage.damping, stage=stage.name, history_every=check_steps,
+        sim.run(t_end=t0 + length, damping=damping, stage=stage.name, history_every=check_steps,
                 output_every=output_steps, stop_when=rule, final_output=frames)
     finally:
         sim.dt_fraction = sim_dt_fraction   # the next stage chooses its step afresh
     wall = time.perf_counter() - wall
     reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
     if reason == "capped":
-        status["detail"] = f"no rule held within {length:.4g} s ({length / T:.3g} response times)"
+        status["detail"] = f"no rule held within {length:.4g} s ({length / (stretch * T):.3g} response times)"
     ratio = status["ratio"] if math.isfinite(status["ratio"]) else unbalanced_force_ratio(sim)
     row = sim.last_row or {}
     return StageResult(
@@ -323,4 +339,5 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         unbalanced_ratio=float(ratio), kinetic_energy=float(row.get("kinetic", 0.0)),
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
-        n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"])
+        n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
+        period_stretch=stretch)

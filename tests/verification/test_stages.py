@@ -36,11 +36,13 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     s = planar_slope_scene()
     crit, _ = s.sim.critical_dt()
     T = response_time(s.sim.model)
-    r = run_stage(s.sim, Stage("fine", duration=0.05 * T, dt_fraction=0.4, damping=fundamental_damping(s.sim)),
-                  frames=False)
+    # on the real masses (a damped stage is density-scaled by default: tests/verification/test_density_scaling.py)
+    r = run_stage(s.sim, Stage("fine", duration=0.05 * T, dt_fraction=0.4, damping=fundamental_damping(s.sim),
+                               density_scaling=False), frames=False)
     assert r.dt == pytest.approx(0.4 * crit) and s.sim.dt_fraction == 0.8
     assert r.steps == pytest.approx(0.05 * T / (0.4 * crit), abs=1)
-    r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim)), frames=False)
+    r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim),
+                               density_scaling=False), frames=False)
     assert r.dt == pytest.approx(0.8 * crit)
     assert SlopeWorkflow().runout_dt_fraction == 0.4
     # a user step above the critical one is refused, and the simulation keeps its own factor
