@@ -525,6 +525,22 @@ class CrackSet:
             return math.inf
         return float(K.stable_dt_kernel(mass, self._nodes, self._const, self._active, self.topology.n_nodes))
 
+    def nodal_stiffness(self, mass: np.ndarray | None = None) -> np.ndarray:
+        """(n_nodes,) stiffness ``S`` [N/m] for which each node must carry mass: the crack springs
+        alone are stable at a step ``dt`` when every node mass ``m >= S dt^2 / 4``.
+
+        An end spring of stiffness ``k = max(k_n, k_t, k_c) L0/2`` between nodes ``a`` and ``b``
+        has ``omega^2 = k (1/m_a + 1/m_b)``; giving each node a mass share ``2 k dt^2/4`` makes it
+        ``(2/dt)^2``. Summing the shares of all springs on a node gives ``S = 2 sum k``, and by
+        Irons' element eigenvalue theorem (the global ``omega_max`` is at most the largest
+        element ``omega`` when the element masses add up to the nodal ones) the whole set is
+        stable (Irons 1970; Belytschko et al. 2014, sec. 6.3). Density scaling
+        (:mod:`fdem.solve.density_scaling`) adds it to the triangles' and contact's shares; ``mass``
+        is not needed (the providers' common signature)."""
+        if self._active.size == 0:
+            return np.zeros(self.topology.n_nodes)
+        return 2.0 * K.node_spring_stiffness(self._nodes, self._const, self._active, self.topology.n_nodes)
+
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
         """Every piece of mutable state, copied: restored by :meth:`load_state_dict` into a crack
