@@ -106,7 +106,10 @@ class Mesh:
 
     @classmethod
     def load(cls, path: str | Path) -> "Mesh":
-        """Read a ``.msh`` written by :meth:`save` or by Gmsh with the same group conventions."""
+        """Read a ``.msh`` written by :meth:`save` or by Gmsh with the same group conventions.
+
+        The file's numbering is kept (a user's mesh is theirs); :func:`fdem.mesh.order.renumber`
+        puts it in memory order when asked."""
         import meshio
 
         m = meshio.read(str(path))
