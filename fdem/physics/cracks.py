@@ -70,6 +70,19 @@ CP_TANPHI_RES = 6  # residual friction coefficient of the broken faces tan(phi_r
 N_PROPS = 7
 
 
+def _colour_major_order(colour: np.ndarray, crack_triangles: np.ndarray) -> np.ndarray:
+    """(n,) topology ids in internal order: by colour, then by the smaller and the larger of the
+    element's two triangles (the two never repeat together: one edge per pair of triangles)."""
+    t = np.sort(np.asarray(crack_triangles, dtype=np.int64), axis=1)
+    return np.lexsort((t[:, 1], t[:, 0], colour)).astype(np.int64)
+
+
+def _legacy_colour_major_order(colour: np.ndarray) -> np.ndarray:
+    """The internal order of crack sets before the within-colour triangle order: by colour,
+    topology order inside a colour. States saved without their order were saved in it."""
+    return np.argsort(colour, kind="stable").astype(np.int64)
+
+
 class CrackSet:
     """All crack elements of a topology: the force provider the solver calls every step.
 
@@ -161,12 +174,15 @@ class CrackSet:
         self._check_snap_back(self.interfaces.reduction)
 
         # Internal element order: colour-major for the colour scheme, so that every colour
-        # pass streams its rows contiguously; identity for the gather scheme. Public arrays
-        # (damage, broken, events) are in topology order.
+        # pass streams its rows contiguously, and within a colour by the element's triangles
+        # (smaller, then larger): node 3t+k belongs to triangle t, so each colour then sweeps
+        # the node arrays forward instead of jumping wherever the topology's edge order puts
+        # its elements (:func:`_colour_major_order`). Identity for the gather scheme. Public
+        # arrays (damage, broken, events) are in topology order.
         tris = np.ascontiguousarray(topology.crack_triangles, dtype=np.int64)
         if scheme == "colour":
             colour = K.colour_elements(tris, topology.n_triangles)
-            self._perm = np.argsort(colour, kind="stable").astype(np.int64)
+            self._perm = _colour_major_order(colour, tris)
             self._colour = np.ascontiguousarray(colour[self._perm])
         else:
             self._perm = np.arange(n, dtype=np.int64)
@@ -546,9 +562,12 @@ class CrackSet:
         """Every piece of mutable state, copied: restored by :meth:`load_state_dict` into a crack
         set built the same way (same topology, property sets, heterogeneity, scheme), the
         elements continue bit for bit (:mod:`fdem.checkpoint`). Arrays are in internal
-        (colour-major) order; ``events`` is the structured :data:`EVENT_DTYPE` array."""
+        (colour-major) order, saved with it as ``order`` (the topology id of each row), so that
+        a crack set whose internal order differs still reads them right; ``events`` is the
+        structured :data:`EVENT_DTYPE` array."""
         d = {
             "kind": type(self).__name__, "n_cracks": self.n_cracks, "scheme": self.scheme,
+            "order": self._perm.copy(),
             "const": self._const.copy(), "status": self._status.copy(), "state": self._state.copy(),
             "diss": self._diss.copy(), "offset": self._offset.copy(), "dilation": self._dil.copy(),
             "broken": self.broken.copy(),
@@ -575,9 +594,10 @@ class CrackSet:
                              f"{type(self).__name__} with {self.n_cracks} elements")
         if d["scheme"] != self.scheme:
             raise ValueError(f"crack state saved with scheme {d['scheme']!r}, this crack set uses {self.scheme!r}")
+        internal, move = self._saved_rows(d)
         for name in ("const", "status", "diss", "offset", "broke_flag"):
-            getattr(self, "_" + name)[:] = d[name]
-        state = np.asarray(d["state"])
+            getattr(self, "_" + name)[:] = internal(d[name])
+        state = internal(d["state"])
         if state.shape[1] == K.N_STATE_V1:  # saved before joint dilation: no sigma_prev, no d
             self._state[:] = 0.0
             self._state[:, :K.N_STATE_V1] = state
@@ -585,7 +605,7 @@ class CrackSet:
         else:
             self._state[:] = state
         if "dilation" in d:
-            self._dil[:] = d["dilation"]
+            self._dil[:] = internal(d["dilation"])
         else:
             self._dil[:] = self._dilation_constants(self.props[self.tag, CP_TANPHI] / float(d["reduction"]))[self._perm]
         self.broken[:] = d["broken"]
@@ -601,9 +621,38 @@ class CrackSet:
         self._elastic_only = bool(d["elastic_only"])
         self.interfaces.restore_reduction(float(d["reduction"]))
         if self.scheme == "gather":
-            self._fe[:] = d["fe"]
+            self._fe[:] = internal(d["fe"])
         if x is not None:
             self._x_last = x
         else:
             self._x_last = None if d["x_last"] is None else np.array(d["x_last"], dtype=np.float64)
-        self._set_active(np.array(d["active"], dtype=np.int64))
+        active = np.array(d["active"], dtype=np.int64)
+        self._set_active(active if move is None else np.sort(move[active]))
+
+    def _saved_rows(self, d: dict):
+        """``(internal, move)`` for a saved state: ``move[i]`` is this set's internal row of the
+        saved row ``i`` (None when the orders agree) and ``internal(a)`` puts a saved per-row
+        array in this set's order. States saved without ``order`` were written in the order
+        of :func:`_legacy_colour_major_order` (colour scheme) or topology order (gather)."""
+        n = self.n_cracks
+        if "order" in d:
+            saved = np.asarray(d["order"], dtype=np.int64)
+        elif self.scheme == "colour":
+            colour = np.empty(n, dtype=np.int32)
+            colour[self._perm] = self._colour
+            saved = _legacy_colour_major_order(colour)
+        else:
+            saved = np.arange(n, dtype=np.int64)
+        if saved.shape != (n,) or not np.array_equal(np.sort(saved), np.arange(n)):
+            raise ValueError(f"crack state's element order is not a permutation of this set's {n} elements")
+        if np.array_equal(saved, self._perm):
+            return np.asarray, None
+        move = self._inv[saved]
+
+        def internal(a):
+            a = np.asarray(a)
+            out = np.empty_like(a)
+            out[move] = a
+            return out
+
+        return internal, move
