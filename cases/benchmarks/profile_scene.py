@@ -220,11 +220,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--joint-offset", type=float, default=None, help="as the four-slopes case's --joint-offset")
     ap.add_argument("--from-checkpoint", type=Path, default=None,
                     help="after the intact stage, profile --steps dynamic steps from this state of a four-slope run")
+    ap.add_argument("--mesh-order", choices=["hilbert", "morton", "none"], default="hilbert",
+                    help="memory order of the mesh (none: Gmsh's numbering, which checkpoints of runs made "
+                         "before renumbering belong to)")
     ap.add_argument("--label", default="", help="label of the records (e.g. before / after)")
     ap.add_argument("--no-save", action="store_true")
     args = ap.parse_args(argv)
 
-    geometry, _, topo = four_slopes.build(args.angle, args.spacing, args.size, joint_offset=args.joint_offset)
+    geometry, _, topo = four_slopes.build(args.angle, args.spacing, args.size, joint_offset=args.joint_offset,
+                                          order=None if args.mesh_order == "none" else args.mesh_order)
     out = Path(tempfile.mkdtemp(prefix="fdem_profile_"))
     sim, cracks = four_slopes.simulation(geometry, topo, out, pictures=False, progress=False)
     contact = sim.providers[1]

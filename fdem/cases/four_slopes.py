@@ -123,15 +123,17 @@ SIZE = 0.5
 
 
 def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
-          joint_offset: float | None = None):
+          joint_offset: float | None = None, order: str | None = "hilbert"):
     """Geometry, mesh and topology of one of the four slopes (``joint_offset``: where the
-    persistent joints sit relative to the toe, :func:`four_slope_geometry`)."""
+    persistent joints sit relative to the toe, :func:`four_slope_geometry`; ``order``: the mesh's
+    memory order, :func:`fdem.mesh.triangulate.mesh_geometry`; ``None`` rebuilds the Gmsh-numbered
+    mesh of runs made before renumbering, whose checkpoints belong to it)."""
     from fdem.mesh.triangulate import mesh_geometry
     from fdem.cases.four_slopes import four_slope_geometry
     from fdem.mesh.topology import build_topology
 
     geometry = four_slope_geometry(angle, spacing, joint_offset=joint_offset)
-    mesh = mesh_geometry(geometry, size, refine_near_joints=refine)
+    mesh = mesh_geometry(geometry, size, refine_near_joints=refine, order=order)
     return geometry, mesh, build_topology(mesh)
 
 
