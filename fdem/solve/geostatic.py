@@ -217,7 +217,7 @@ def _spd_solve(A, b):
     Liu 1981, ch. 4): the minimum-degree ordering's fill hardly depends on the order it is
     handed, but its own run time does. On the 179,243-unknown CST matrix of the fine four-slope
     scene at size 0.18 it took 13.5 s in the Hilbert-curve numbering of :mod:`fdem.mesh.order`
-    and 1.0 s after RCM (1.0 s in Gmsh's numbering; fill 22.5 M in all three)."""
+    and 1.0 s after RCM (1.0 s in Gmsh's numbering; fill 22.3-22.5 M entries in all three)."""
     A = sp.csr_matrix(A)
     p = reverse_cuthill_mckee(A, symmetric_mode=True)
     lu = spla.splu(A[p][:, p].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
