@@ -200,8 +200,8 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
     over memory. ``alpha`` [1/s] and ``local`` [-] are the damping coefficients (both 0: no
     damping code runs); ``ledger`` asks for the state energies (strain, kinetic, moments),
     which cost a little and are only needed on output steps. ``partial`` is a work array of
-    shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia`` (n_nodes,) gives the nodes'
-    inertial masses of a density-scaled stage, or ``None`` (the triangles' own lumped masses;
+    shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia`` (n_nodes, 2) gives the nodes'
+    inertial masses and their inverses of a density-scaled stage, or ``None`` (the triangles' own lumped masses;
     gravity always acts on those). Returns the sums named in :data:`LEDGER_FIELDS` (state
     energies 0 unless ``ledger``).
     """
@@ -232,8 +232,8 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
                                   use_viscous)
             m = tc[t, TC_MASS]
             for k in range(3):  # one inlined call site keeps the compile time down
-                mi = m if inertia is None else inertia[i + k]
-                im = tc[t, TC_INV_MASS] if inertia is None else 1.0 / mi
+                mi = m if inertia is None else inertia[i + k, 0]
+                im = tc[t, TC_INV_MASS] if inertia is None else inertia[i + k, 1]
                 a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
                                  local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
                 kin += a[2]
@@ -305,7 +305,7 @@ def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy,
 def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia):
     """Fast path of :func:`step_exploded`: elastic triangles, gravity, interaction forces
     (``f_int`` an array, or ``None`` when there are no providers), damping (``(alpha, local)``
-    or ``None``), inertial masses of a density-scaled stage (``inertia`` (n_nodes,) or ``None``)
+    or ``None``), inertial masses of a density-scaled stage (``inertia`` (n_nodes, 2): masses and inverses, or ``None``)
     and constraints; no viscosity, external loads or state energies. ``None``
     arguments compile to specialisations without that code (numba prunes the branches).
 
@@ -358,8 +358,8 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
                 ma = mb = mc = m
                 ia = ib = ic = tc[t, TC_INV_MASS]
             else:
-                ma, mb, mc = inertia[i], inertia[i + 1], inertia[i + 2]
-                ia, ib, ic = 1.0 / ma, 1.0 / mb, 1.0 / mc
+                ma, mb, mc = inertia[i, 0], inertia[i + 1, 0], inertia[i + 2, 0]
+                ia, ib, ic = inertia[i, 1], inertia[i + 1, 1], inertia[i + 2, 1]
             a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damping, flags, v_prescribed)
             b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damping, flags, v_prescribed)
             c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damping, flags, v_prescribed)

@@ -57,12 +57,14 @@ def triangle_nodal_stiffness(model) -> np.ndarray:
     return s
 
 
-def nodal_stiffness(model, providers, mass: np.ndarray) -> np.ndarray:
+def nodal_stiffness(model, providers, mass: np.ndarray, triangles: np.ndarray | None = None) -> np.ndarray:
     """(n_nodes,) stiffness ``S_i`` [N/m] every node must carry mass for (module docstring):
-    the triangles' shares plus each force provider's ``nodal_stiffness(mass)``. A provider
+    the triangles' shares (``triangles``, or :func:`triangle_nodal_stiffness` when not given:
+    it does not change, a simulation computes it once) plus each force provider's
+    ``nodal_stiffness(mass)``. A provider
     with only a ``stable_dt(mass)`` counts as ``m (2 / dt_p)^2`` on every node (its bound
     applies to the real masses); one with neither adds no stiffness."""
-    s = triangle_nodal_stiffness(model)
+    s = (triangle_nodal_stiffness(model) if triangles is None else triangles).copy()
     for p in providers:
         fn = getattr(p, "nodal_stiffness", None)
         if fn is not None:

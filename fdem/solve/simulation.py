@@ -181,6 +181,8 @@ class Simulation:
                              f"[0, 1] or be None, got {density_scaling!r}")
         self.density_scaling = density_scaling or None
         self.inertia: np.ndarray | None = None  # inertial node masses while density-scaled, else None
+        self._inertia_kernel: np.ndarray | None = None  # (n_nodes, 2): inertia and its inverse, for the kernels
+        self._triangle_stiffness: np.ndarray | None = None  # the triangles' share of S, fixed: computed once
         self._scaled_dt = math.inf
         self.model = model
         self.dt_fraction = dt_fraction
@@ -335,11 +337,14 @@ class Simulation:
         old = self.inertia
         if on and self.density_scaling and self.user_dt is None and self.exploded:
             mass = self.state.mass
-            stiffness = density_scaling.nodal_stiffness(self.model, self.providers, mass)
+            if self._triangle_stiffness is None:
+                self._triangle_stiffness = density_scaling.triangle_nodal_stiffness(self.model)
+            stiffness = density_scaling.nodal_stiffness(self.model, self.providers, mass, self._triangle_stiffness)
             self._scaled_dt = density_scaling.scaled_critical_step(mass, stiffness, self.density_scaling)
             self.inertia = density_scaling.inertial_masses(mass, stiffness, self._scaled_dt)
+            self._inertia_kernel = np.ascontiguousarray(np.column_stack([self.inertia, 1.0 / self.inertia]))
         else:
-            self.inertia = None
+            self.inertia = self._inertia_kernel = None
         if book and (old is not None or self.inertia is not None):
             before = self.state.mass if old is None else old
             after = self.state.mass if self.inertia is None else self.inertia
@@ -382,7 +387,7 @@ class Simulation:
             # fast path (most steps of a dynamic or damped stage): no state energies needed
             r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
                 x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
-                self.flags, self.v_prescribed, gx, gy, dt, self._partial, self.inertia)
+                self.flags, self.v_prescribed, gx, gy, dt, self._partial, self._inertia_kernel)
             sums = StepSums(strain=0.0, kinetic=kin, gravity_moment=0.0, external_moment=0.0,
                             damping_early=d_e, damping_late=d_l, viscous_early=0.0, viscous_late=0.0,
                             reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
@@ -390,7 +395,7 @@ class Simulation:
         elif self.exploded:
             sums = StepSums._make(step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
                                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous,
-                                                ledger, self._partial, self.inertia))
+                                                ledger, self._partial, self._inertia_kernel))
         else:
             ptr, corners = self._csr
             strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
