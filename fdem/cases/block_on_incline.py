@@ -41,6 +41,7 @@ from fdem.mesh.triangulate import mesh_geometry
 from fdem.solve.model import DEFAULT_ELEMENT_DAMPING, Model
 from fdem.solve.simulation import Simulation
 from fdem.mesh.topology import build_topology
+from fdem.io.jsonable import dumps, write_json
 
 __all__ = ["NAME", "G", "CONTACT_PENALTY", "unbreakable", "sliding_distance", "build", "incline_model", "run",
            "STUDY_SIZES", "STUDY_FRACTIONS", "STUDY_CASES", "damping_study", "plot_study", "main", "YOUNG", "POISSON", "DENSITY"]
@@ -157,9 +158,8 @@ def damping_study(path: Path, sizes=STUDY_SIZES, fractions=STUDY_FRACTIONS, case
                       f"error {100 * r['slide_error']:+.3f} %, dt {r['dt_s']:.4g} s, wall {r['wall_s']:.1f} s",
                       flush=True)
                 path.parent.mkdir(parents=True, exist_ok=True)
-                path.write_text(json.dumps({"description": "block on incline, slide at 1 s vs rigid block, "
-                                            "element damping as a fraction of critical",
-                                            "runs": rows}, indent=1))
+                write_json(path, {"description": "block on incline, slide at 1 s vs rigid block, "
+                                  "element damping as a fraction of critical", "runs": rows}, indent=1)
     return rows
 
 
@@ -219,8 +219,8 @@ def main(argv=None) -> dict:
     r = run(args.theta, args.phi, t_end, args.width, args.height, out_dir=args.out, size=args.size,
             element_damping=args.element_damping)
     r = {"case": NAME, **r, "time_capped": t_end < args.t_end}
-    print(json.dumps(r, indent=1))
-    (args.out / "summary.json").write_text(json.dumps(r, indent=1))
+    print(dumps(r, indent=1))
+    write_json(args.out / "summary.json", r, indent=1)
     return r
 
 

@@ -22,7 +22,6 @@ centre and over-predicts the strength by about 50 % (measured: 1.50 vs 1.09 at D
 """
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from pathlib import Path
@@ -39,6 +38,7 @@ from fdem.mesh.triangulate import mesh_geometry
 from fdem.solve.model import Model
 from fdem.solve.simulation import Simulation
 from fdem.mesh.topology import build_topology
+from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "DIAMETER", "PENALTY", "disc_mesh", "run", "main", "load_plot", "YOUNG", "POISSON", "DENSITY", "F_T", "COHESION", "PHI", "G_I", "G_II"]
 
@@ -142,10 +142,10 @@ def main(argv=None) -> dict:
               f"sigma_t = {r['sigma_t_Pa'] / 1e6:.3f} MPa = {r['ratio']:.3f} f_t; first crack "
               f"{fe['mode'] if fe else '-'} at {fe['distance_from_centre_over_R'] if fe else float('nan'):.2f} R "
               f"from the centre; {r['seconds']:.1f} s")
-    (args.out / "brazilian.json").write_text(json.dumps(results, indent=1))
+    write_json(args.out / "brazilian.json", results, indent=1)
     summary = {"case": NAME, "diameter_m": DIAMETER, "f_t_Pa": F_T,
                "runs": [{k: v for k, v in r.items() if k not in ("load_N_per_m", "shortening_m")} for r in results]}
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_json(args.out / "summary.json", summary, indent=1)
     written = [args.out / "summary.json", args.out / "brazilian.json"]
     if not args.no_pictures:
         written.append(load_plot(results, args.out / "brazilian_load.png"))

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import os
 import time
@@ -40,6 +39,7 @@ import numpy as np
 
 from fdem.workflow.ensembles import Distribution, Ensemble, run_ensemble
 from fdem.results.ensemble_summary import summarize
+from fdem.io.jsonable import write_json
 
 __all__ = ["GEOMETRY", "PlanarDFNScene", "PARAMETERS", "ensemble", "main"]
 
@@ -182,7 +182,7 @@ def main(argv=None) -> dict:
               "n": args.n, "n_run": run.n_run, "n_skipped": run.n_skipped, "wall_seconds": run.wall_seconds,
               "load_average_before": load, "load_average_after": os.getloadavg(), "cpu_count": os.cpu_count(),
               "size_m": args.size, "date": time.strftime("%Y-%m-%d %H:%M")}
-    (args.out / "timing.json").write_text(json.dumps(timing, indent=1))
+    write_json(args.out / "timing.json", timing, indent=1)
     pf = summary["probability_of_failure"]
     print(f"{run.n_run} realizations run, {run.n_skipped} already in {run.table}, {run.wall_seconds:.1f} s; "
           f"FoS median {summary['fos']['p50']:.3f}, P(FoS < 1) = {pf['k']}/{pf['m']} "

@@ -25,7 +25,6 @@ geostatic stage is a static solve with pre-loaded crack elements, and stages end
 """
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from pathlib import Path
@@ -40,6 +39,7 @@ from fdem.geometry.joint_sets import BrickSet
 from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import simple_slope
 from fdem.physics.crack_properties import CrackProperties
+from fdem.io.jsonable import write_json
 
 __all__ = ["four_slope_property_sets", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
@@ -280,10 +280,6 @@ def main(argv=None) -> dict:
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")
-    else:
-        from fdem.io.jsonable import jsonable
-
-        summary = jsonable(summary)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / "summary.json", summary)
     print(f"wrote {out / 'summary.json'}")
     return summary

@@ -34,7 +34,6 @@ carry over to FDEM; every choice is a keyword of :func:`property_sets`):
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -46,6 +45,7 @@ from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_par
 from fdem.geometry.joint_sets import SegmentSet
 from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import simple_slope
+from fdem.io.jsonable import write_json
 
 __all__ = ["MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "toughness_G_I", "property_sets", "build",
            "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS", "JOINT_COHESION", "JOINT_FRICTION"]
@@ -251,7 +251,7 @@ def main(argv=None) -> dict:
     summary = results[rules[0]] if len(rules) == 1 else {"cases": results}
     args.out.mkdir(parents=True, exist_ok=True)
     if len(rules) > 1:
-        (args.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+        write_json(args.out / "summary.json", summary)
     return summary
 
 

@@ -18,7 +18,7 @@ relative to the base (mean over the block's nodes minus the base's, from the sta
 from __future__ import annotations
 
 import argparse
-import json
+from fdem.io.jsonable import write_json
 import time
 from pathlib import Path
 
@@ -155,9 +155,9 @@ def main(argv=None):
         print(f"h = {size:g} m: slip {100 * r['slip_m']:.3f} cm, Newmark {100 * r['newmark_m']:.3f} cm, "
               f"error {100 * r['error']:+.2f} %, ledger {r['balance_error_relative']:.2e}, "
               f"{r['steps']} steps, {r['wall_s']:.1f} s", flush=True)
-        (args.out / "newmark.json").write_text(json.dumps(
-            {"description": "Newmark sliding block: slip relative to the base vs the rigid-block solution",
-             "runs": rows}, indent=1))
+        write_json(args.out / "newmark.json",
+                   {"description": "Newmark sliding block: slip relative to the base vs the rigid-block solution",
+                    "runs": rows}, indent=1)
     if not args.no_pictures:
         plot(rows, args.out / "newmark.png")
     return {"runs": rows}

@@ -31,7 +31,7 @@ assumptions hold: a rigid block on a perfectly plastic plane.
 from __future__ import annotations
 
 import argparse
-import json
+from fdem.io.jsonable import write_json
 import math
 import time
 from dataclasses import dataclass
@@ -356,7 +356,7 @@ def main(argv=None) -> list:
         for size in args.size:
             r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time)
             rows.append(r)
-            (args.out / "planar_failure.json").write_text(json.dumps(rows, indent=1))
+            write_json(args.out / "planar_failure.json", rows, indent=1)
             if r["fos"] is None:
                 print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, trials capped at "
                       f"{args.max_time:g} s: no factor of safety (smoke run)", flush=True)

@@ -29,7 +29,7 @@ limit equilibrium of the wedge above the toe joint gives about F = 1.2 (Hoek-Bra
 """
 from __future__ import annotations
 
-import json
+from fdem.io.jsonable import write_json
 import math
 import time
 import warnings
@@ -150,7 +150,7 @@ def main(argv=None) -> dict:
              **factor_of_safety_figures(result), "wall_seconds": time.perf_counter() - wall}
     summary = report.write(out, extra=extra, pictures_on=not args.no_pictures)
     summary["wall_seconds"] = time.perf_counter() - wall
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / "summary.json", summary)
     run = summary["runout"]
     print(f"outcome {summary['outcome']}"
           + (f", factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "

@@ -107,10 +107,10 @@ def summarize(out, pictures: bool = True, confidence: float = 0.95) -> dict:
     }
     if pictures:
         summary["pictures"] = _plots(out, rows, ok, fos, varied, spearman, summary, run_d, run_v)
-    from fdem.io.jsonable import jsonable
+    from fdem.io.jsonable import write_json
 
     # undefined statistics (no realization with a FoS, an infinite upper bound) are JSON null
-    (out / "summary.json").write_text(json.dumps(jsonable(summary), indent=1, allow_nan=False))
+    write_json(out / "summary.json", summary, indent=1)
     return summary
 
 

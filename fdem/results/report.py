@@ -17,14 +17,13 @@ fragments, events) are in ``docs/outputs.md``.
 """
 from __future__ import annotations
 
-import json
+from fdem.io.jsonable import jsonable, write_json
 import math
 from pathlib import Path
 import numpy as np
 from fdem.results import analysis, events
 from fdem.io import pictures
 from fdem.solve.simulation import Simulation
-from fdem.io.jsonable import jsonable
 
 __all__ = ["RunReport"]
 
@@ -125,7 +124,7 @@ class RunReport:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         summary = self.summary(extra)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        write_json(out / "summary.json", summary)
         cat = self.catalogue()
         events.write_catalogue_csv(out / "events.csv", cat)
         if pictures_on:

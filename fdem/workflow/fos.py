@@ -13,7 +13,7 @@ Dawson, Roth & Drescher 1999). Bisection narrows ``[stable, failing]`` to the to
 from __future__ import annotations
 
 import dataclasses
-import json
+from fdem.io.jsonable import write_json
 import math
 import time
 from dataclasses import dataclass, field
@@ -306,7 +306,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "fos.json").write_text(json.dumps(result.as_dict(), indent=2))
+        write_json(out / "fos.json", result.as_dict())
         if result.failure_positions is not None and cracks is not None:
             _failure_picture(out / "fos_failure.png", sim, cracks, result)
     return result
