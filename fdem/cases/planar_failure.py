@@ -51,7 +51,7 @@ from fdem.solve.model import Model
 from fdem.solve.damping import Damping
 from fdem.solve.simulation import Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time
-from fdem.workflow.fos import factor_of_safety
+from fdem.workflow.fos import DEFAULT_MAX_TRIALS, MIN_RELATIVE_TOL, BracketError, factor_of_safety
 from fdem.mesh.topology import build_topology
 
 from fdem.geometry.joint_sets import SegmentSet
@@ -60,7 +60,7 @@ from fdem.geometry.polygons import simple_slope
 
 __all__ = ["planar_slope_geometry", "G", "UNIT_WEIGHT", "PENALTY", "HEIGHT", "GEOMETRIES", "PlanarScene",
            "property_sets", "analytic", "planar_failure_simulation", "block_nodes", "trial_stage", "run_case",
-           "plot", "main", "YOUNG", "POISSON", "DENSITY", "JOINT_COHESION", "JOINT_FRICTION"]
+           "plot", "parse_args", "check_search", "main", "YOUNG", "POISSON", "DENSITY", "JOINT_COHESION", "JOINT_FRICTION"]
 
 
 def planar_slope_geometry(height: float, face_angle: float, plane_angle: float, crest_length: float | None = None,
@@ -262,7 +262,10 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
     """Factor of safety of geometry ``name`` (:data:`GEOMETRIES`) at mesh ``size`` [m] by
     strength reduction (:func:`fdem.workflow.fos.factor_of_safety`), with the analytic value.
     ``max_time`` [s]: cap on each trial's simulated time (a smoke run: capped trials count as
-    failing, so its factor of safety means nothing)."""
+    failing, so its factor of safety means nothing). When the cap stops the lower end's trial
+    before it converges, the search cannot start: the row then has ``fos = None`` and says why
+    (``fos_undefined``). Every other error of the search (a bracket the slope contradicts
+    without a cap, bad settings) is raised, never reported as a smoke run."""
     from fdem.cases.common import cap_simulated_time
 
     g = GEOMETRIES[name]
@@ -273,12 +276,15 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
     t1 = time.perf_counter()
     try:
         result = factor_of_safety(scene.sim, lower, upper, tol=tol, trial=trial_stage(scene.sim), **fos_options)
-    except ValueError as err:
-        if max_time is None:
+    except BracketError as err:
+        if not err.trial.time_capped:
             raise
-        # a smoke run: the capped trials cannot converge, so the bracket "fails" at its lower end
+        # the --max-time cap stopped the trial before its rule could decide: not a verdict
         return {"geometry": name, "size_m": size, "n_triangles": scene.n_triangles, "dt_s": scene.sim.dt,
                 "analytic_fos": le.fos, "fos": None, "bracket": None, "time_capped": True,
+                "fos_undefined": f"the trial at F = {err.trial.factor:g} stopped at the --max-time cap of "
+                                 f"{max_time:g} s before it converged or failed: the factor of safety is undefined "
+                                 f"(smoke run)",
                 "capped_trial": str(err), "steps": int(scene.sim.state.step),
                 "seconds_build": t1 - t0, "seconds_fos": time.perf_counter() - t1}
     t2 = time.perf_counter()
@@ -290,7 +296,8 @@ def run_case(name: str, size: float, lower: float = 0.8, upper: float = 2.0, tol
         "analytic_fos": le.fos, "analytic": le.as_dict(),
         "fos": fos, "bracket": [float(b) for b in result.bracket],
         "error_relative": fos / le.fos - 1.0,
-        "n_trials": len(result.trials),
+        "n_trials": len(result.trials), "search_ended_by": result.ended_by,
+        "capped_trials": sum(t.time_capped for t in result.trials),
         "trials": [{k: t.as_dict()[k] for k in ("factor", "stable", "reason", "t_end", "t_start", "steps",
                                                  "unbalanced_ratio", "max_displacement", "wall_seconds")}
                    for t in result.trials],
@@ -334,7 +341,9 @@ def plot(rows: list, path: Path) -> Path:
     return path
 
 
-def main(argv=None) -> list:
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line's options, checked (``parser.error``, exit status 2, on a bad one)
+    before anything is meshed."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/planar_failure"))
     parser.add_argument("--size", type=float, nargs="+", default=[1.0, 0.7, 0.5],
@@ -347,23 +356,55 @@ def main(argv=None) -> list:
     parser.add_argument("--no-pictures", action="store_true", help="skip the FoS-against-mesh figure")
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each trial's simulated time [s] (a smoke run: its FoS means nothing)")
+    parser.add_argument("--max-trials", type=int, default=DEFAULT_MAX_TRIALS,
+                        help=f"cap on the trials of each search, the two ends included (default {DEFAULT_MAX_TRIALS}); "
+                             "the search ends at --tol or at this cap, and the output says which")
     args = parser.parse_args(argv)
     check_common(parser, args)
+    check_search(parser, args)
+    return args
+
+
+def check_search(parser: argparse.ArgumentParser, args) -> None:
+    """Refuse a search that cannot run or cannot end: ``--lower`` and ``--upper`` positive and
+    finite with lower < upper, ``--tol`` positive, finite and at least ``MIN_RELATIVE_TOL`` of
+    ``--upper`` (below it the bisection cannot move), ``--max-trials`` >= 2."""
+    for option, value in (("--lower", args.lower), ("--upper", args.upper)):
+        if not (math.isfinite(value) and value > 0):
+            parser.error(f"{option} must be a positive finite reduction factor, got {value}")
+    if not args.upper > args.lower:
+        parser.error(f"--upper ({args.upper}) must exceed --lower ({args.lower}): the bracket is [stable, failing]")
+    if not (math.isfinite(args.tol) and args.tol > 0):
+        parser.error(f"--tol must be a positive bracket width, got {args.tol}")
+    if args.tol < MIN_RELATIVE_TOL * args.upper:
+        parser.error(f"--tol {args.tol:g} is below the resolution of the search, {MIN_RELATIVE_TOL:g} of --upper "
+                     f"({MIN_RELATIVE_TOL * args.upper:.3g})")
+    if args.max_trials < 2:
+        parser.error(f"--max-trials must be at least 2 (the two ends of the bracket), got {args.max_trials}")
+
+
+def main(argv=None) -> list:
+    args = parse_args(argv)
     set_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.geometry:
         for size in args.size:
-            r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time)
+            r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time,
+                         max_trials=args.max_trials)
             rows.append(r)
             write_json(args.out / "planar_failure.json", rows, indent=1)
             if r["fos"] is None:
-                print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, trials capped at "
-                      f"{args.max_time:g} s: no factor of safety (smoke run)", flush=True)
+                print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles: {r['fos_undefined']}",
+                      flush=True)
                 continue
             print(f"{name:14s} size {size:4.2f} m: {r['n_triangles']:6d} triangles, FoS {r['fos']:.3f} "
                   f"in [{r['bracket'][0]:.3f}, {r['bracket'][1]:.3f}] against Hoek-Bray {r['analytic_fos']:.3f} "
-                  f"({100 * r['error_relative']:+.1f} %), {r['seconds_fos']:.0f} s", flush=True)
+                  f"({100 * r['error_relative']:+.1f} %), {r['seconds_fos']:.0f} s"
+                  + (f"; the search hit --max-trials {args.max_trials} before --tol" if r["search_ended_by"] ==
+                     "max_trials" else "")
+                  + (f"; {r['capped_trials']} trial(s) stopped at --max-time, counted as failing: smoke run"
+                     if r["capped_trials"] else ""), flush=True)
     print(f"wrote {args.out / 'planar_failure.json'}")
     if not args.no_pictures and any(r["fos"] is not None for r in rows):
         print(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")

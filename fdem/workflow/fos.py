@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from fdem.io.jsonable import write_json
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,8 +24,55 @@ from fdem.solve.damping import Damping
 from fdem.solve.simulation import Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, response_time, run_stage
 
-__all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "fundamental_damping",
-           "default_trial_stage", "factor_of_safety"]
+__all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "fundamental_damping",
+           "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS"]
+
+MIN_RELATIVE_TOL = 1e-6
+"""Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
+bisection asks for a resolution no trial can decide (a factor of safety is judged by stages
+whose own convergence limits are far coarser) and, near float resolution (about 2e-16
+relative), the bracket's midpoint stops moving and the search never ends."""
+
+DEFAULT_MAX_TRIALS = 40
+"""Default cap on the trials of one search, the two ends included. With the tolerance at its
+smallest (:data:`MIN_RELATIVE_TOL` of the upper end) bisection of a bracket ``[0, upper]``
+needs ``log2(1e6) + 2 = 22`` trials; the cap leaves room above that, and a search that meets
+it says so (``FoSResult.ended_by``)."""
+
+
+def _real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def check_bracket(lower: float, upper: float, tol: float, max_trials: int = DEFAULT_MAX_TRIALS) -> None:
+    """A ``ValueError`` naming the first bad setting of a factor-of-safety search: ``lower`` and
+    ``upper`` positive and finite with ``lower < upper``, ``tol`` finite and at least
+    :data:`MIN_RELATIVE_TOL` times ``upper``, ``max_trials`` an integer >= 2 (the two ends).
+    Cheap: cases call it when they parse their options, before any meshing."""
+    for name, value in (("lower", lower), ("upper", upper)):
+        if not (_real(value) and math.isfinite(value) and value > 0):
+            raise ValueError(f"factor_of_safety: {name} must be a positive finite factor, got {value!r}")
+    if not upper > lower:
+        raise ValueError(f"factor_of_safety: upper ({upper}) must exceed lower ({lower})")
+    if not (_real(tol) and math.isfinite(tol) and tol > 0):
+        raise ValueError(f"factor_of_safety: tol must be a positive finite bracket width, got {tol!r}")
+    if tol < MIN_RELATIVE_TOL * upper:
+        raise ValueError(f"factor_of_safety: tol = {tol:g} is below the resolution a search can reach, "
+                         f"{MIN_RELATIVE_TOL:g} of the upper factor ({MIN_RELATIVE_TOL * upper:.3g}); "
+                         f"give tol >= {MIN_RELATIVE_TOL * upper:.3g}")
+    if isinstance(max_trials, bool) or not isinstance(max_trials, (int, np.integer)) or max_trials < 2:
+        raise ValueError(f"factor_of_safety: max_trials must be an integer >= 2 (the two ends of the bracket), "
+                         f"got {max_trials!r}")
+
+
+class BracketError(ValueError):
+    """The trial at an end of the bracket contradicts it (``lower`` fails or ``upper`` stands).
+    ``trial`` is that :class:`Trial`; ``trial.time_capped`` tells a trial stopped by the run's
+    ``--max-time`` cap (a smoke run) from a genuine verdict."""
+
+    def __init__(self, message: str, trial: "Trial"):
+        super().__init__(message)
+        self.trial = trial
 
 
 def _interfaces(sim):
@@ -82,22 +130,28 @@ class GravityIncrease:
 
 @dataclass
 class Trial:
-    """One trial of the search: the factor, ``stable`` or not, and the stage that decided it."""
+    """One trial of the search: the factor, ``stable`` or not, and the stage that decided it.
+    ``time_capped``: the trial stopped at the simulation's ``time_cap`` (``--max-time``), so
+    "not stable" only means "not converged yet"."""
 
     factor: float
     stable: bool
     result: StageResult
+    time_capped: bool = False
 
     def as_dict(self) -> dict:
-        return {"factor": self.factor, "stable": self.stable, **self.result.as_dict()}
+        return {"factor": self.factor, "stable": self.stable, "time_capped": self.time_capped,
+                **self.result.as_dict()}
 
 
 @dataclass
 class FoSResult:
     """Result of :func:`factor_of_safety`.
 
-    ``fos`` is the middle of ``bracket = (largest stable factor, smallest failing factor)``,
-    whose width is at most the tolerance. ``failure_surface`` lists the crack elements broken
+    ``fos`` is the middle of ``bracket = (largest stable factor, smallest failing factor)``.
+    ``ended_by`` says what ended the search: ``"tolerance"`` (the bracket is at most ``tolerance``
+    wide) or ``"max_trials"`` (the trial cap came first: the bracket is wider than asked).
+    ``failure_surface`` lists the crack elements broken
     or gone inelastic (softened or slid) in the first failing trial, ``failure_broken`` those
     broken; ``failure_positions`` the node positions at the end of that trial.
     """
@@ -112,9 +166,12 @@ class FoSResult:
     failure_positions: np.ndarray | None = None
     failure_mode: np.ndarray | None = None
     wall_seconds: float = 0.0
+    ended_by: str = "tolerance"
+    max_trials: int = DEFAULT_MAX_TRIALS
 
     def as_dict(self) -> dict:
         return {"fos": self.fos, "bracket": list(self.bracket), "tolerance": self.tolerance, "trigger": self.trigger,
+                "ended_by": self.ended_by, "max_trials": self.max_trials,
                 "n_trials": len(self.trials), "wall_seconds": self.wall_seconds,
                 "failure_surface_elements": int(self.failure_surface.size),
                 "failure_broken_elements": int(self.failure_broken.size),
@@ -160,7 +217,7 @@ def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[T
     if not stable and cracks is not None:
         info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
                     positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
-    return Trial(factor, stable, result), info
+    return Trial(factor, stable, result, time_capped=bool(getattr(sim, "time_capped", False))), info
 
 
 _WORKER: dict = {}
@@ -184,14 +241,17 @@ def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Sta
 
 def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
                      trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
-                     build=None, build_args: tuple = ()) -> FoSResult:
+                     build=None, build_args: tuple = (), max_trials: int = DEFAULT_MAX_TRIALS) -> FoSResult:
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
     trial restarts from it (:func:`fdem.solve.checkpoint.snapshot`) with the trigger set to the trial
     factor and runs ``trial`` (default :func:`default_trial_stage`). ``lower`` must be stable
-    and ``upper`` failing, else a ``ValueError`` names the trial that contradicts the bracket.
-    The search stops when the bracket is narrower than ``tol``. On return ``sim`` is back in
+    and ``upper`` failing, else a :class:`BracketError` (a ``ValueError``) names the trial that
+    contradicts the bracket. The search stops when the bracket is at most ``tol`` wide or after
+    ``max_trials`` trials (the two ends included), whichever comes first; ``FoSResult.ended_by``
+    says which. ``tol`` below :data:`MIN_RELATIVE_TOL` of ``upper`` is refused
+    (:func:`check_bracket`): bisection cannot resolve it, and at float resolution it never ends. On return ``sim`` is back in
     its starting state with the trigger at its starting value; with ``out_dir`` the result is
     written to ``out_dir/fos.json`` and the first failing trial to ``out_dir/fos_failure.png``
     (displacement since the equilibrium state, broken crack elements coloured by mode and the
@@ -206,11 +266,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     """
     from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
 
-    for name, value in (("lower", lower), ("upper", upper), ("tol", tol)):
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"factor_of_safety: {name} must be positive and finite, got {value!r}")
-    if not upper > lower:
-        raise ValueError(f"factor_of_safety: upper ({upper}) must exceed lower ({lower})")
+    check_bracket(lower, upper, tol, max_trials)
     workers = int(workers)
     if workers < 1:
         raise ValueError(f"factor_of_safety: workers must be >= 1, got {workers}")
@@ -272,15 +328,21 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         ends = run_many([lower, upper])
         if not ends[0]:
             r = trials[0].result
-            raise ValueError(f"factor_of_safety: the slope already fails at the lower factor F = {lower:g} "
-                             f"({r.reason}: {r.detail}); lower the bracket")
+            raise BracketError(f"factor_of_safety: the slope already fails at the lower factor F = {lower:g} "
+                               f"({r.reason}: {r.detail}); lower the bracket", trials[0])
         if ends[1]:
             r = trials[1].result
-            raise ValueError(f"factor_of_safety: the slope is still stable at the upper factor F = {upper:g} "
-                             f"(converged {r.detail}); raise the bracket")
+            raise BracketError(f"factor_of_safety: the slope is still stable at the upper factor F = {upper:g} "
+                               f"(converged {r.detail}); raise the bracket", trials[1])
         lo, hi = lower, upper
+        ended_by = "tolerance"
         while hi - lo > tol:
-            points = [lo + (hi - lo) * (k + 1) / (workers + 1) for k in range(workers)]
+            room = max_trials - len(trials)
+            if room <= 0:
+                ended_by = "max_trials"
+                break
+            n = min(workers, room)
+            points = [lo + (hi - lo) * (k + 1) / (n + 1) for k in range(n)]
             stable = run_many(points)
             failing = [f for f, st in zip(points, stable) if not st]
             hi = min(failing + [hi])
@@ -302,7 +364,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                        failure_surface=first_fail.get("surface", np.zeros(0, np.int64)),
                        failure_broken=first_fail.get("broken", np.zeros(0, np.int64)),
                        failure_positions=first_fail.get("positions"), failure_mode=first_fail.get("mode"),
-                       wall_seconds=time.perf_counter() - wall)
+                       wall_seconds=time.perf_counter() - wall, ended_by=ended_by, max_trials=int(max_trials))
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
