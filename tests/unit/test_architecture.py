@@ -17,7 +17,7 @@ LAYERS = {  # subpackage (or top-level module) -> floor
     "mesh": 2,
     "kernels": 3,
     "physics": 4,
-    "solve": 5,
+    "solve": 5, "blocks": 5,
     "results": 6,
     "workflow": 7,
     "cases": 8,
