@@ -27,7 +27,8 @@ Units: SI, plane strain per metre of thickness (forces in N/m, energies in J/m).
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+import warnings
+from typing import Collection, Mapping, Sequence
 import numpy as np
 from fdem.physics.interfaces import Interfaces
 from fdem.kernels import cracks as K
@@ -83,6 +84,46 @@ def _legacy_colour_major_order(colour: np.ndarray) -> np.ndarray:
     return np.argsort(colour, kind="stable").astype(np.int64)
 
 
+def _snap_back_advice(energy: str, given: float, need: float, length: float, per_length: bool,
+                      penalty: str) -> str:
+    """What a user can do about a snap-back of the element of reference length ``length`` [m]
+    that needs the most energy, ``need`` [J/m^2] against ``given``. Where the stiffness is a
+    penalty over the element length (``k = p / L0``) the energy needed grows in proportion to
+    ``L0``: elements ``need / given`` times shorter everywhere (this one below
+    ``length * given / need``) satisfy it. Else, or too, raise the energy (or the penalty) of
+    the property set."""
+    fix = f"raise {energy} of this property set above {need:.4g} J/m^2"
+    if not per_length:
+        return f"To fix it, {fix} (its stiffness does not depend on the element size)."
+    factor = need / given
+    return (f"The energy needed grows with the element length (stiffness = {penalty} / L0): refine the mesh by at "
+            f"least a factor {factor:.3g} (element sizes divided by {factor:.3g}; this element would need "
+            f"L0 < {length * given / need:.4g} m), or {fix}, or raise its penalty {penalty} by that factor.")
+
+
+def _check_unused_sets(property_sets: Mapping[int, CrackProperties], present: np.ndarray,
+                       absent_ok: Collection[int]) -> None:
+    """Property sets for joint-set tags with no crack element: a ``UserWarning`` for those in
+    ``absent_ok`` and for any when the mesh has no joint at all (an intact-rock mesh given a
+    scene's whole table, as the benchmarks do, or every joint dropped at a coarse size: no
+    joint set for a typo to stand for); a ``ValueError`` otherwise (see :class:`CrackSet`)."""
+    have = {int(t) for t in present}
+    unused = sorted(int(t) for t in property_sets if int(t) != INTACT and int(t) not in have)
+    if not unused:
+        return
+    allowed = {int(t) for t in absent_ok} | (set(unused) if not have - {INTACT} else set())
+    label = {t: property_sets[t].name or f"joint set {t}" for t in unused}
+    wrong = [t for t in unused if t not in allowed]
+    if wrong:
+        raise ValueError(f"property set(s) for tag(s) {wrong} ({', '.join(label[t] for t in wrong)}) match no crack "
+                         f"element: the mesh has tags {sorted(have)}; check the tag numbers (joint set j of the "
+                         f"geometry has tag j)")
+    warnings.warn(f"joint set(s) {unused} ({', '.join(label[t] for t in unused)}) have no crack element in this "
+                  f"mesh (its tags: {sorted(have)}): their property sets are unused (joints all shorter than the "
+                  f"geometry's min_joint_length at this element size, or a mesh without joints)", UserWarning,
+                  stacklevel=3)
+
+
 class CrackSet:
     """All crack elements of a topology: the force provider the solver calls every step.
 
@@ -101,6 +142,13 @@ class CrackSet:
         the faster on this hardware (see ``docs/benchmarks/cracks.json``).
     parallel_min : below this many live elements a serial loop runs instead (no threading
         overhead on small problems).
+    absent_ok : joint-set tags that may have no crack element in this mesh (a set whose joints
+        were all dropped as shorter than the geometry's ``min_joint_length`` at a coarse size):
+        a property set given for one of them draws a ``UserWarning`` naming it, as does any
+        joint-set property set when the mesh has no joint at all. A property set for any other
+        tag without elements is a ``ValueError`` naming the tag and the tags the mesh has (a
+        mistyped tag would otherwise leave its joints on another set's properties without a
+        word). The intact set (tag 0) may always be absent.
     contact_penalty : the contact penalty ``p`` [Pa] of the scene, if the crack elements' faces
         will be handed to contact. Compression across an element is then resisted with the
         stiffness contact would have for a flat penetration of its two triangles,
@@ -118,7 +166,8 @@ class CrackSet:
 
     def __init__(self, topology: Topology, property_sets: Mapping[int, CrackProperties] | Sequence[CrackProperties],
                  heterogeneity: Heterogeneity | None = None, scheme: str = "colour",
-                 parallel_min: int = K.PARALLEL_MIN, contact_penalty: float | None = None) -> None:
+                 parallel_min: int = K.PARALLEL_MIN, contact_penalty: float | None = None,
+                 absent_ok: Collection[int] = ()) -> None:
         if scheme not in ("colour", "gather"):
             raise ValueError(f"scheme must be 'colour' or 'gather', got {scheme!r}")
         self.topology = topology
@@ -141,6 +190,7 @@ class CrackSet:
             raise ValueError(
                 f"crack elements with tag(s) {missing} have no property set (e.g. element {c} at "
                 f"({mid[0]:.6g}, {mid[1]:.6g}) on {what}); given sets: {sorted(self.property_sets)}")
+        _check_unused_sets(self.property_sets, present, absent_ok)
 
         self.length0 = np.asarray(topology.crack_length0, dtype=np.float64)
         self.nodes = np.ascontiguousarray(topology.crack_nodes, dtype=np.int32)
@@ -252,8 +302,8 @@ class CrackSet:
                 raise ValueError(
                     f"{label}: G_I = {p.G_I:.6g} J/m^2 is too small for f_t = {ft[sel[i]]:.6g} Pa and "
                     f"k_n = {self.kn[sel[i]]:.6g} Pa/m (element {sel[i]}, L0 = {self.length0[sel[i]]:.4g} m): the "
-                    f"softening branch would snap back; smallest admissible G_I is {need_I[i]:.6g} J/m^2 "
-                    f"(raise G_I or the normal penalty)")
+                    f"softening branch would snap back; smallest admissible G_I is {need_I[i]:.6g} J/m^2. "
+                    + _snap_back_advice("G_I", p.G_I, need_I[i], self.length0[sel[i]], p.k_n is None, "p_n"))
             zs = softening_integral(p.softening) * softening_max_slope(p.softening)
             need_II = zs * c[sel] ** 2 / self.kt[sel]
             i = int(np.argmax(need_II))
@@ -261,8 +311,9 @@ class CrackSet:
                 raise ValueError(
                     f"{label}: G_II = {p.G_II:.6g} J/m^2 is too small for c = {c[sel[i]]:.6g} Pa and "
                     f"k_t = {self.kt[sel[i]]:.6g} Pa/m (element {sel[i]}, L0 = {self.length0[sel[i]]:.4g} m): the "
-                    f"softening branch would snap back; smallest admissible G_II is {need_II[i]:.6g} J/m^2 "
-                    f"(raise G_II or the tangential penalty)")
+                    f"softening branch would snap back; smallest admissible G_II is {need_II[i]:.6g} J/m^2. "
+                    + _snap_back_advice("G_II", p.G_II, need_II[i], self.length0[sel[i]], p.k_t is None and
+                                        (p.p_t is not None or p.k_n is None), "p_t" if p.p_t is not None else "p_n"))
 
     _elastic_only = False
 
