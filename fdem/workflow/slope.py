@@ -22,12 +22,13 @@ Every stage's result (why it ended, when, how many steps) goes into the returned
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 import numpy as np
 from fdem.solve.damping import NO_DAMPING
 from fdem.solve.simulation import Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
-from fdem.workflow.fos import factor_of_safety, fundamental_damping
+from fdem.workflow.fos import check_bracket, factor_of_safety, fundamental_damping
 
 __all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "runout_stage",
            "factor_of_safety_figures"]
@@ -80,16 +81,54 @@ class SlopeWorkflow:
     runout_dt_fraction: float | None = 0.4
 
     def __post_init__(self):
+        """Every field checked, the message naming it: a negative time or displacement, an
+        inverted bracket or a ratio outside (0, 1) would otherwise run and mean nothing."""
         if self.reduction not in ("steps", "rate"):
-            raise ValueError(f"reduction must be 'steps' or 'rate', got {self.reduction!r}")
-        if any(not (math.isfinite(f) and f > 0) for f in self.factors):
-            raise ValueError(f"reduction factors must be positive and finite, got {self.factors}")
-        for name in ("reduction_rate", "final_strength", "equilibrium_ratio", "rest_kinetic_ratio"):
+            raise ValueError(f"SlopeWorkflow.reduction must be 'steps' or 'rate', got {self.reduction!r}")
+        try:
+            factors = tuple(self.factors)
+        except TypeError:
+            factors = ()
+        if not factors or any(not (_real(f) and math.isfinite(f) and f > 0) for f in factors):
+            raise ValueError(f"SlopeWorkflow.factors must be a non-empty sequence of positive finite reduction "
+                             f"factors, got {self.factors!r}")
+        if any(b <= a for a, b in zip(factors, factors[1:])):
+            raise ValueError(f"SlopeWorkflow.factors must increase (each step weakens the slope), got {self.factors!r}")
+        _check_positive(self, "reduction_rate")
+        for name in ("final_strength", "equilibrium_ratio", "rest_kinetic_ratio"):
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"SlopeWorkflow.{name} must be positive and finite, got {v!r}")
-        if self.runout_dt_fraction is not None and not 0.0 < self.runout_dt_fraction <= 1.0:
-            raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got {self.runout_dt_fraction}")
+            if not (_real(v) and 0.0 < v < 1.0):
+                raise ValueError(f"SlopeWorkflow.{name} must lie in (0, 1), got {v!r}")
+        for name in ("step_time", "fail_displacement", "runout_time"):
+            _check_positive(self, name, optional=True)
+        if self.runout_dt_fraction is not None and not (_real(self.runout_dt_fraction)
+                                                        and 0.0 < self.runout_dt_fraction <= 1.0):
+            raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got "
+                             f"{self.runout_dt_fraction!r}")
+        if self.fos is not None:
+            try:
+                lower, upper, tol = self.fos
+            except (TypeError, ValueError):
+                raise ValueError(f"SlopeWorkflow.fos must be (lower, upper, tol) or None, got {self.fos!r}") from None
+            try:
+                check_bracket(lower, upper, tol)
+            except ValueError as err:
+                raise ValueError(f"SlopeWorkflow.fos = {self.fos!r}: {err}".replace("factor_of_safety: ", "")) from None
+
+
+def _real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _check_positive(wf: "SlopeWorkflow", name: str, optional: bool = False) -> None:
+    """A ``ValueError`` naming ``SlopeWorkflow.<name>`` unless it is a positive finite number
+    (or, with ``optional``, ``None``: its default from the model)."""
+    v = getattr(wf, name)
+    if optional and v is None:
+        return
+    if not (_real(v) and math.isfinite(v) and v > 0):
+        raise ValueError(f"SlopeWorkflow.{name} must be a positive finite number{' or None' if optional else ''}, "
+                         f"got {v!r}")
 
 
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
