@@ -40,13 +40,21 @@ from fdem.blocks.assembly import BlockSystem
 from fdem.blocks.cone import ConeProblem, ConeSolverError, solve_cone
 from fdem.blocks.strength import Strength, interface_strength
 
-__all__ = ["BlockSystemError", "Mechanism", "Statics", "EquilibriumResult", "RigidFoS", "YieldResult",
+__all__ = ["BlockSystemError", "StandsBeyondBracket", "Mechanism", "Statics", "EquilibriumResult", "RigidFoS", "YieldResult",
            "statics", "check_equilibrium", "factor_of_safety", "yield_acceleration", "cross2"]
 
 
 class BlockSystemError(ValueError):
     """Bad input to a rigid-block analysis: a block with no support, a mechanism no strength
     resists, a bracket that holds no limit, or a solver that gave no answer."""
+
+
+class StandsBeyondBracket(BlockSystemError):
+    """The blocks still stand at the upper end of the factor-of-safety bracket (``upper``)."""
+
+    def __init__(self, message: str, upper: float):
+        super().__init__(message)
+        self.upper = upper
 
 
 def cross2(r: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -325,8 +333,8 @@ def factor_of_safety(st: Statics, strengths: Mapping[int, Strength], lower: floa
     hi = check_equilibrium(st, strengths, upper, seismic)
     trials.append((upper, hi.stable))
     if hi.stable:
-        raise BlockSystemError(f"the blocks still stand at F = {upper:g}: the factor of safety exceeds it "
-                               f"(give a larger upper bound)")
+        raise StandsBeyondBracket(f"the blocks still stand at F = {upper:g}: the factor of safety exceeds it "
+                                  f"(give a larger upper bound)", upper)
     a, b, mech = lower, upper, hi.mechanism
     its += lo.iterations + hi.iterations
     while b / a - 1 > rtol:

@@ -19,6 +19,7 @@ CASES = {
     "planar-failure": "fdem.cases.planar_failure",
     "newmark-block": "fdem.cases.newmark_block",
     "ensemble": "fdem.cases.ensemble",
+    "rigid-blocks": "fdem.cases.rigid_blocks",
 }
 """Case name (as ``fdem run`` takes it) -> module."""
 
