@@ -200,6 +200,9 @@ def main(argv=None) -> dict:
                              "lengthens the demo's runout by about 8 %%, docs/pareto.md)")
     parser.add_argument("--max-steps", type=int, default=None, help="0: mesh and pictures only")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--rigid-blocks", action="store_true",
+                        help="first print the rigid-block factor of safety and mechanism of the same joints "
+                             "(seconds; docs/rigid_blocks.md)")
     args = parser.parse_args(argv)
     check_common(parser, args)
     if not 0.0 < args.runout_dt_fraction <= 1.0:
@@ -226,6 +229,9 @@ def main(argv=None) -> dict:
             parser.error(str(err))
     for w in caught:
         print(f"warning: {w.message}")
+    if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
+        from fdem.cases.rigid_blocks import print_rigid_blocks
+        print_rigid_blocks(geometry, four_slope_property_sets(), DENSITY * GRAVITY, args.out)
     elapsed = time.perf_counter() - t0
     threads = threads_for_mesh(args.threads, topo.n_triangles)
     report = quality_report(mesh)

@@ -359,6 +359,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--max-trials", type=int, default=DEFAULT_MAX_TRIALS,
                         help=f"cap on the trials of each search, the two ends included (default {DEFAULT_MAX_TRIALS}); "
                              "the search ends at --tol or at this cap, and the output says which")
+    parser.add_argument("--rigid-blocks", action="store_true",
+                        help="first print the rigid-block factor of safety and mechanism of the same joints "
+                             "(seconds; docs/rigid_blocks.md)")
     args = parser.parse_args(argv)
     check_common(parser, args)
     check_search(parser, args)
@@ -389,6 +392,10 @@ def main(argv=None) -> list:
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.geometry:
+        if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
+            from fdem.cases.rigid_blocks import print_rigid_blocks
+            print_rigid_blocks(planar_slope_geometry(HEIGHT, **GEOMETRIES[name]), property_sets(),
+                               UNIT_WEIGHT, args.out / name)
         for size in args.size:
             r = run_case(name, size, args.lower, args.upper, args.tol, max_time=args.max_time,
                          max_trials=args.max_trials)

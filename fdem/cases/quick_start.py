@@ -120,9 +120,15 @@ def main(argv=None) -> dict:
                         help=f"search the factor of safety by bisection first (bracket {FOS_BRACKET[:2]}, "
                              f"tolerance {FOS_BRACKET[2]}; about 6 more damped trials)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--rigid-blocks", action="store_true",
+                        help="first print the rigid-block factor of safety and mechanism of the same joints "
+                             "(seconds; docs/rigid_blocks.md)")
     args = parser.parse_args(argv)
     check_common(parser, args)
     set_threads(args.threads)
+    if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
+        from fdem.cases.rigid_blocks import print_rigid_blocks
+        print_rigid_blocks(geometry(), property_sets(), DENSITY * GRAVITY, args.out)
 
     from fdem.geometry.polygons import slope_toe
     from fdem.results.report import RunReport
