@@ -22,6 +22,8 @@ centre and over-predicts the strength by about 50 % (measured: 1.50 vs 1.09 at D
 """
 from __future__ import annotations
 
+import argparse
+import math
 import time
 import warnings
 from pathlib import Path
@@ -35,12 +37,14 @@ from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import disc
 from fdem.physics.elastic import ElasticMaterial
 from fdem.mesh.triangulate import mesh_geometry
+from fdem.solve.cost import check_mesh_budget, estimate_triangles
 from fdem.solve.model import Model
 from fdem.solve.simulation import Simulation
 from fdem.mesh.topology import build_topology
 from fdem.io.jsonable import write_json
 
-__all__ = ["NAME", "DIAMETER", "PENALTY", "disc_mesh", "run", "main", "load_plot", "YOUNG", "POISSON", "DENSITY", "F_T", "COHESION", "PHI", "G_I", "G_II"]
+__all__ = ["NAME", "DIAMETER", "PENALTY", "ARC_DEG", "MIN_DIVISIONS", "largest_size", "check_loading", "disc_mesh", "run", "parse_args",
+           "main", "load_plot", "YOUNG", "POISSON", "DENSITY", "F_T", "COHESION", "PHI", "G_I", "G_II"]
 
 NAME = "brazilian-disc"
 DIAMETER = 0.1  # m
@@ -48,6 +52,41 @@ YOUNG, POISSON, DENSITY = 10e9, 0.2, 2700.0  # Pa, -, kg/m^3
 F_T, COHESION, PHI = 5e6, 20e6, 30.0  # Pa, Pa, deg (c = 4 f_t keeps shear failure at the platens away)
 G_I, G_II = 20.0, 200.0  # J/m^2
 PENALTY = 10 * YOUNG  # Pa, Munjiza p = alpha E with alpha = 10
+ARC_DEG = 6.0  # half-angle of each loading arc [deg]
+
+
+MIN_DIVISIONS = 10
+"""Fewest elements across the diameter (``D / h``) the test allows (:func:`largest_size`)."""
+
+
+def largest_size() -> float:
+    """The coarsest element size [m] the test allows, ``D / 10`` (10 mm): the loaded diameter,
+    along which the splitting crack runs, spans at least 10 elements.
+
+    Measured at the defaults (one load direction): D/10, 218 triangles, 0.95 f_t; D/8, 172
+    triangles, 0.82 f_t (outside the verification's 15 %); D/6 and anything coarser than about
+    13 mm (D/7.6) the same 120-triangle mesh, 0.88 f_t: the disc's polygon has at least 24
+    sides, so the mesh stops following the size (``--size 1.0`` was reported as "D/2" on it).
+    The validated meshes are D/25 and finer (``docs/pareto.md``, ``docs/verification.md``)."""
+    return DIAMETER / MIN_DIVISIONS
+
+
+def check_loading(divisions: float, v_platen: float, arc_deg: float = ARC_DEG) -> None:
+    """A ``ValueError`` naming the first setting the test cannot honour: ``divisions`` (D / element
+    size) below :data:`MIN_DIVISIONS` (:func:`largest_size`); ``v_platen`` [m/s] not positive (the platens would
+    never load the disc and the run would go on to its step cap) or faster than 1 % of the
+    P-wave speed ``sqrt(E / rho)`` (19 m/s: an impact, not the quasi-static loading the formula
+    assumes); ``arc_deg`` outside (0, 45)."""
+    if not (math.isfinite(arc_deg) and 0.0 < arc_deg < 45.0):
+        raise ValueError(f"brazilian disc: arc_deg must lie in (0, 45) deg, got {arc_deg}")
+    if not (math.isfinite(divisions) and divisions >= MIN_DIVISIONS):
+        raise ValueError(f"brazilian disc: element size D/{divisions:g} is coarser than the largest allowed, "
+                         f"{largest_size():.4g} m (D/{MIN_DIVISIONS}): the loaded diameter must span at least "
+                         f"{MIN_DIVISIONS} elements (D/8 recovered 0.82 f_t, D/10 0.95 f_t)")
+    v_max = 0.01 * math.sqrt(YOUNG / DENSITY)
+    if not (math.isfinite(v_platen) and 0.0 < v_platen <= v_max):
+        raise ValueError(f"brazilian disc: v_platen must be a positive speed of at most {v_max:.3g} m/s (1 % of the "
+                         f"P-wave speed: faster is an impact, not a quasi-static test), got {v_platen} m/s")
 
 
 def disc_mesh(divisions: float, algorithm: str = "delaunay"):
@@ -67,7 +106,7 @@ def disc_mesh(divisions: float, algorithm: str = "delaunay"):
         return mesh_geometry(Geometry([disc((0.0, 0.0), DIAMETER / 2, n_sides=n_sides)]), size, algorithm=algorithm)
 
 
-def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = 6.0, algorithm: str = "delaunay",
+def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = ARC_DEG, algorithm: str = "delaunay",
         out_dir: Path | None = None, check_every: int = 50, progress: bool = False,
         max_time: float | None = None, fracture_energy: float = G_I) -> dict:
     """Load the disc to failure; return peak load, recovered strength and the first fracture event.
@@ -79,7 +118,9 @@ def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = 6.0, algor
 
     ``divisions``: D / element size. The run stops once the load has dropped below half its
     peak, or at ``max_time`` [s] of simulated time (a smoke run: then ``time_capped`` is true).
+    Settings the test cannot honour raise a ``ValueError`` before meshing (:func:`check_loading`).
     """
+    check_loading(divisions, v_platen, arc_deg)
     R = DIAMETER / 2
     topo = build_topology(disc_mesh(divisions, algorithm))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
@@ -121,7 +162,11 @@ def run(divisions: int = 25, v_platen: float = 0.05, arc_deg: float = 6.0, algor
     return result
 
 
-def main(argv=None) -> dict:
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line's options, checked before anything is meshed (``parser.error``, exit
+    status 2): ``--size`` / ``--sizes`` no coarser than :func:`largest_size`, ``--v-platen``
+    positive and quasi-static (:func:`check_loading`), the mesh within the memory available
+    (:func:`fdem.solve.cost.check_mesh_budget`). ``args.divisions`` holds the D / h of each run."""
     parser = case_parser(__doc__, name=NAME, out="runs/brazilian", size=None,
                          size_help=f"element size [m] (default D/25 = {DIAMETER / 25:g} m; overrides --sizes)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[25], help="D / element size, one run each")
@@ -129,11 +174,34 @@ def main(argv=None) -> dict:
     parser.add_argument("--no-fields", action="store_true", help="write no VTU series, only the summary and the plot")
     args = parser.parse_args(argv)
     check_common(parser, args)
+    if args.size is not None:
+        if args.size > largest_size() * (1 + 1e-9):
+            parser.error(f"--size {args.size:g} m is coarser than the largest allowed, {largest_size():.4g} m "
+                         f"(D/{MIN_DIVISIONS}): the loaded diameter must span at least {MIN_DIVISIONS} elements "
+                         f"(D/8 recovered 0.82 f_t, D/10 0.95 f_t; above 13 mm the disc stops following the size, "
+                         f"every such size giving the same 120 triangles)")
+        try:
+            check_mesh_budget(estimate_triangles(math.pi * DIAMETER ** 2 / 4, args.size))
+        except ValueError as err:
+            parser.error(f"--size {args.size:g} m: {err}")
+        args.divisions = [int(round(DIAMETER / args.size))]
+    else:
+        args.divisions = list(args.sizes)
+    for n in args.divisions:
+        try:
+            check_loading(n, args.v_platen)
+            check_mesh_budget(estimate_triangles(math.pi * DIAMETER ** 2 / 4, DIAMETER / n))
+        except ValueError as err:
+            parser.error(str(err).replace("brazilian disc: ", "").replace("v_platen", "--v-platen"))
+    return args
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
     set_threads(args.threads)
-    divisions = [max(2, int(round(DIAMETER / args.size)))] if args.size is not None else args.sizes
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
-    for n in divisions:
+    for n in args.divisions:
         r = run(n, args.v_platen, out_dir=None if args.no_fields else args.out / f"D_over_{n}", progress=True,
                 max_time=args.max_time)
         results.append(r)
@@ -141,7 +209,9 @@ def main(argv=None) -> dict:
         print(f"D/h = {n}: {r['n_triangles']} triangles, peak {r['peak_load_N_per_m']:.4g} N/m, "
               f"sigma_t = {r['sigma_t_Pa'] / 1e6:.3f} MPa = {r['ratio']:.3f} f_t; first crack "
               f"{fe['mode'] if fe else '-'} at {fe['distance_from_centre_over_R'] if fe else float('nan'):.2f} R "
-              f"from the centre; {r['seconds']:.1f} s")
+              f"from the centre; {r['seconds']:.1f} s"
+              + (f" (SMOKE RUN: stopped at --max-time {args.max_time:g} s before the load fell past its peak, "
+                 f"so the peak is not the disc's strength)" if r["time_capped"] else ""))
     write_json(args.out / "brazilian.json", results, indent=1)
     summary = {"case": NAME, "diameter_m": DIAMETER, "f_t_Pa": F_T,
                "runs": [{k: v for k, v in r.items() if k not in ("load_N_per_m", "shortening_m")} for r in results]}
