@@ -23,6 +23,7 @@ Writes ``--out/summary.json`` (slide against the exact answer, rotation, energie
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -43,7 +44,8 @@ from fdem.solve.simulation import Simulation
 from fdem.mesh.topology import build_topology
 from fdem.io.jsonable import dumps, write_json
 
-__all__ = ["NAME", "G", "CONTACT_PENALTY", "unbreakable", "sliding_distance", "build", "incline_model", "run",
+__all__ = ["NAME", "G", "CONTACT_PENALTY", "unbreakable", "sliding_distance", "check_scene", "build", "incline_model",
+           "run", "parse_args",
            "STUDY_SIZES", "STUDY_FRACTIONS", "STUDY_CASES", "damping_study", "plot_study", "main", "YOUNG", "POISSON", "DENSITY"]
 
 NAME = "block-on-incline"
@@ -64,14 +66,52 @@ def sliding_distance(theta_deg: float, phi_deg: float, t: float) -> float:
     return max(a, 0.0) * t * t / 2
 
 
+def check_scene(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float = 1.0,
+                block_height: float = 1.0, size: float | None = None,
+                element_damping: float = DEFAULT_ELEMENT_DAMPING) -> None:
+    """A ``ValueError`` naming the first setting the scene cannot honour, before any meshing.
+
+    ``theta_deg`` in (0, 90): the plane is made by turning gravity, ``g (sin theta, -cos theta)``;
+    at 90 deg and beyond gravity leaves the plane (at 95 deg it pulls the block off the base,
+    at 200 deg up through it) while the "exact" slide formula still returns a number.
+    ``phi_deg`` in [0, 90) (``mu = tan(phi)``). ``t_end`` > 0 [s]. Block sides > 0 [m].
+    ``size`` > 0 [m] and no larger than the block's smaller side (coarser, the block is two
+    triangles whose crack element stands for the whole body). ``element_damping`` in [0, 1]
+    (fraction of critical, ``docs/damping.md``: the study spans 0-1; above critical the
+    viscosity only shortens the stable step, by about ``sqrt(1 + xi^2) - xi``)."""
+    finite = all(map(math.isfinite, (theta_deg, phi_deg, t_end, block_width, block_height, element_damping)))
+    if not finite:
+        raise ValueError(f"block on incline: every setting must be a finite number, got theta {theta_deg}, "
+                         f"phi {phi_deg}, t_end {t_end}, width {block_width}, height {block_height}, "
+                         f"element_damping {element_damping}")
+    if not 0.0 < theta_deg < 90.0:
+        raise ValueError(f"block on incline: theta (the incline) must lie in (0, 90) deg, got {theta_deg}: the plane "
+                         f"is made by turning gravity, which leaves the plane at 90 deg and beyond")
+    if not 0.0 <= phi_deg < 90.0:
+        raise ValueError(f"block on incline: phi (the contact's friction angle) must lie in [0, 90) deg, got {phi_deg}")
+    if not t_end > 0:
+        raise ValueError(f"block on incline: t_end must be a positive simulated time [s], got {t_end}")
+    if not (block_width > 0 and block_height > 0):
+        raise ValueError(f"block on incline: the block's width and height (--width, --height) must be positive [m], got "
+                         f"{block_width} x {block_height}")
+    if size is not None and not (math.isfinite(size) and 0 < size <= min(block_width, block_height)):
+        raise ValueError(f"block on incline: the element size (--size) must be positive and at most the block's smaller side, "
+                         f"{min(block_width, block_height):g} m, got {size}")
+    if not 0.0 <= element_damping <= 1.0:
+        raise ValueError(f"block on incline: element_damping (a fraction of critical) must lie in [0, 1], got "
+                         f"{element_damping}")
+
+
 def build(theta_deg: float, phi_deg: float, block_width: float = 1.0, block_height: float = 1.0,
           size: float | None = None, base_length: float = 8.0,
           element_damping: float = DEFAULT_ELEMENT_DAMPING):
     """Model, crack set, contact set and the block's node ids.
 
     ``size`` [m]: target element size (default half the block's smaller side);
-    ``element_damping``: fraction of critical viscosity of each triangle (0: none).
+    ``element_damping``: fraction of critical viscosity of each triangle (0: none). Settings
+    the scene cannot honour raise a ``ValueError`` before meshing (:func:`check_scene`).
     """
+    check_scene(theta_deg, phi_deg, 1.0, block_width, block_height, size, element_damping)
     size = size or min(block_width, block_height) / 2
     model, base_nodes, block_nodes = incline_model(theta_deg, 0.25 * base_length, block_width, block_height, size,
                                                    base_length, element_damping)
@@ -105,6 +145,7 @@ def run(theta_deg: float, phi_deg: float, t_end: float = 1.0, block_width: float
         out_dir: Path | None = None, energy_tolerance: float | None = 0.05, size: float | None = None,
         element_damping: float = DEFAULT_ELEMENT_DAMPING) -> dict:
     """Release the block from rest; return its mean slide along the plane and its rotation at ``t_end``."""
+    check_scene(theta_deg, phi_deg, t_end, block_width, block_height, size, element_damping)
     model, cracks, contact, block = build(theta_deg, phi_deg, block_width, block_height, size=size,
                                           element_damping=element_damping)
     sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="incline", progress=False)
@@ -193,13 +234,19 @@ def plot_study(path: Path, png: Path) -> None:
     plt.close(fig)
 
 
-def main(argv=None) -> dict:
+_OPTIONS = {"theta": "--theta", "phi": "--phi", "t_end": "--t-end", "width": "--width", "height": "--height",
+            "element size": "--size", "element_damping": "--element-damping"}
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line's options, checked (:func:`check_scene`; ``parser.error``, exit status
+    2) before anything is meshed."""
     parser = case_parser(__doc__, name=NAME, out="runs/incline", size=None,
                          size_help="element size [m] (default: half the block's smaller side)")
     parser.add_argument("--theta", type=float, default=30.0, help="incline angle [deg]")
     parser.add_argument("--phi", type=float, default=20.0, help="friction angle of the contact [deg]")
-    parser.add_argument("--width", type=float, default=1.0)
-    parser.add_argument("--height", type=float, default=1.0)
+    parser.add_argument("--width", type=float, default=1.0, help="block width along the plane [m]")
+    parser.add_argument("--height", type=float, default=1.0, help="block height [m]")
     parser.add_argument("--t-end", type=float, default=1.0, help="simulated time of the slide [s]")
     parser.add_argument("--element-damping", type=float, default=DEFAULT_ELEMENT_DAMPING,
                         help="fraction of critical viscosity of each triangle's highest mode (0: undamped; "
@@ -208,6 +255,18 @@ def main(argv=None) -> dict:
                         help="run the mesh-size x damping-fraction study (docs/damping.md) into this file")
     args = parser.parse_args(argv)
     check_common(parser, args)
+    try:
+        check_scene(args.theta, args.phi, args.t_end, args.width, args.height, args.size, args.element_damping)
+    except ValueError as err:
+        message = str(err).replace("block on incline: ", "")
+        for name, option in _OPTIONS.items():
+            message = message.replace(name, f"{option}", 1) if message.startswith(name) else message
+        parser.error(message)
+    return args
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
     set_threads(args.threads)
     if args.damping_study is not None:
         damping_study(args.damping_study)

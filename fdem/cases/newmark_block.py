@@ -18,13 +18,15 @@ relative to the base (mean over the block's nodes minus the base's, from the sta
 from __future__ import annotations
 
 import argparse
-from fdem.io.jsonable import write_json
+import math
 import time
+
+from fdem.io.jsonable import write_json
 from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.block_on_incline import CONTACT_PENALTY, G, YOUNG, incline_model, unbreakable
+from fdem.cases.block_on_incline import CONTACT_PENALTY, G, YOUNG, check_scene, incline_model, unbreakable
 from fdem.cases.common import check_common, set_threads
 from fdem.physics.cracks import CrackSet
 from fdem.physics.contact import ContactSet
@@ -33,7 +35,8 @@ from fdem.physics.shaking import AccelerationHistory, shake_base
 from fdem.reference.newmark import newmark_response, yield_acceleration
 from fdem.solve.simulation import Simulation
 
-__all__ = ["AMPLITUDE_RATIO", "PERIOD", "T_SETTLE", "SIZES", "pulse", "build", "run", "plot", "main", "THETA", "PHI"]
+__all__ = ["AMPLITUDE_RATIO", "PERIOD", "T_SETTLE", "SIZES", "pulse", "check_shaking", "build", "run", "plot",
+           "parse_args", "main", "THETA", "PHI"]
 
 THETA, PHI = 20.0, 30.0       # deg: a_y = 1.967 m/s^2
 AMPLITUDE_RATIO = 2.0         # A / a_y
@@ -47,6 +50,31 @@ def pulse(theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITU
     """Base acceleration along the plane (x): ``-ratio a_y sin(2 pi (t - start) / period)``, one cycle."""
     a_y, _ = yield_acceleration(theta_deg, phi_deg, G)
     return AccelerationHistory.sine_pulse(-ratio * a_y, period, start=start)
+
+
+def check_shaking(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio: float = AMPLITUDE_RATIO,
+                  period: float = PERIOD, t_after: float = 0.5, element_damping: float = DEFAULT_ELEMENT_DAMPING,
+                  n_samples: int = 200, penalty: float = CONTACT_PENALTY) -> None:
+    """A ``ValueError`` naming the first setting the test cannot honour, before any meshing:
+    the incline's (:func:`fdem.cases.block_on_incline.check_scene`, 1 m block), and ``phi > theta``
+    (the block must stick under gravity alone: yield acceleration ``a_y > 0``), ``ratio > 1``
+    (``A / a_y``: at or below 1 the block never slips and the relative error divides by a zero
+    Newmark displacement), ``period`` > 0 [s], ``t_after`` >= 0 [s], ``n_samples`` >= 1,
+    ``penalty`` > 0 [Pa]."""
+    check_scene(theta_deg, phi_deg, 1.0, 1.0, 1.0, size, element_damping)
+    if not phi_deg > theta_deg:
+        raise ValueError(f"newmark block: phi ({phi_deg} deg) must exceed theta ({theta_deg} deg) so that the block "
+                         f"sticks under gravity alone (yield acceleration > 0)")
+    for name, value in (("ratio (A / a_y)", ratio), ("period", period), ("penalty", penalty)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"newmark block: {name} must be a positive number, got {value}")
+    if not ratio > 1:
+        raise ValueError(f"newmark block: ratio (A / a_y) must exceed 1, got {ratio}: below the yield acceleration "
+                         f"the block never slips and there is no displacement to compare")
+    if not (math.isfinite(t_after) and t_after >= 0):
+        raise ValueError(f"newmark block: t_after must be a non-negative time [s], got {t_after}")
+    if not (isinstance(n_samples, int) and n_samples >= 1):
+        raise ValueError(f"newmark block: n_samples must be a positive integer, got {n_samples!r}")
 
 
 def build(history: AccelerationHistory, theta_deg: float = THETA, phi_deg: float = PHI, size: float = 0.5,
@@ -70,7 +98,9 @@ def run(size: float = 0.5, theta_deg: float = THETA, phi_deg: float = PHI, ratio
     The run lasts until ``t_after`` [s] past the Newmark block's stopping time, or ``max_time``
     [s] of simulated time if that is shorter (a smoke run: ``time_capped`` is then true and the
     error compares an unfinished slip). ``n_samples`` slip samples are recorded along the way.
+    Settings the test cannot honour raise a ``ValueError`` before meshing (:func:`check_shaking`).
     """
+    check_shaking(size, theta_deg, phi_deg, ratio, period, t_after, element_damping, n_samples, penalty)
     history = pulse(theta_deg, phi_deg, ratio, period)
     t_nm, d_nm, _ = newmark_response(history.t, history.along((1, 0)), theta_deg, phi_deg, G)
     t_end = float(t_nm[-1]) + t_after
@@ -135,7 +165,9 @@ def plot(rows: list[dict], png: Path) -> None:
     plt.close(fig)
 
 
-def main(argv=None):
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line's options, checked before anything is meshed (``parser.error``, exit
+    status 2): at least one ``--size``, each positive and at most the 1 m block's side."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/newmark"),
                         help="folder for newmark.json and newmark.png (default runs/newmark; the committed figures: --out docs/verification)")
@@ -146,6 +178,18 @@ def main(argv=None):
                         help="cap on each run's simulated time [s] (a smoke run; default: until the block stops)")
     args = parser.parse_args(argv)
     check_common(parser, args)
+    if not args.size:
+        parser.error("--size needs at least one element size [m]")
+    for size in args.size:
+        try:
+            check_shaking(size)
+        except ValueError as err:
+            parser.error(str(err).replace("block on incline: ", "").replace("newmark block: ", ""))
+    return args
+
+
+def main(argv=None):
+    args = parse_args(argv)
     set_threads(args.threads)
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
@@ -154,7 +198,9 @@ def main(argv=None):
         rows.append(r)
         print(f"h = {size:g} m: slip {100 * r['slip_m']:.3f} cm, Newmark {100 * r['newmark_m']:.3f} cm, "
               f"error {100 * r['error']:+.2f} %, ledger {r['balance_error_relative']:.2e}, "
-              f"{r['steps']} steps, {r['wall_s']:.1f} s", flush=True)
+              f"{r['steps']} steps, {r['wall_s']:.1f} s"
+              + (f" (SMOKE RUN: stopped at --max-time {args.max_time:g} s, before the block came to rest: the error "
+                 f"compares an unfinished slip)" if r["time_capped"] else ""), flush=True)
         write_json(args.out / "newmark.json",
                    {"description": "Newmark sliding block: slip relative to the base vs the rigid-block solution",
                     "runs": rows}, indent=1)
