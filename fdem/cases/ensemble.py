@@ -41,7 +41,7 @@ from fdem.workflow.ensembles import Distribution, Ensemble, run_ensemble
 from fdem.results.ensemble_summary import summarize
 from fdem.io.jsonable import write_json
 
-__all__ = ["GEOMETRY", "PlanarDFNScene", "PARAMETERS", "ensemble", "main"]
+__all__ = ["GEOMETRY", "PlanarDFNScene", "PARAMETERS", "ensemble", "parse_args", "main"]
 
 GEOMETRY = dict(face_angle=60.0, plane_angle=35.0, tension_crack_offset=None)
 
@@ -153,7 +153,10 @@ def ensemble(n: int = 20, seed: int = 0, method: str = "lhs", size: float = 2.0,
                     max_time=max_time)
 
 
-def main(argv=None) -> dict:
+def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
+    """The command line's options, checked before anything is meshed (``parser.error``, exit
+    status 2), and the ensemble they describe (:class:`fdem.workflow.ensembles.Ensemble`
+    validates ``--n``, ``--seed``, ``--method`` and ``--max-time``)."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/ensemble"))
     parser.add_argument("--n", type=int, default=20, help="realizations")
@@ -169,12 +172,21 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     if not (math.isfinite(args.size) and args.size > 0):
         parser.error(f"--size must be a positive number of metres, got {args.size}")
+    if args.workers < 1:
+        parser.error(f"--workers must be at least 1, got {args.workers}")
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        parser.error(f"--timeout must be a positive number of seconds, got {args.timeout}")
     try:
         ens = ensemble(args.n, args.seed, args.method, args.size, max_time=args.max_time)
     except ValueError as err:
         parser.error(str(err))
     if args.no_pictures:
         ens = dataclasses.replace(ens, pictures=False)
+    return args, ens
+
+
+def main(argv=None) -> dict:
+    args, ens = parse_args(argv)
     load = os.getloadavg()
     run = run_ensemble(ens, args.out, workers=args.workers, scheduler=args.scheduler, timeout=args.timeout)
     summary = summarize(args.out, pictures=not args.no_pictures)
