@@ -159,8 +159,8 @@ def estimate_triangles(area_m2: float, size_m: float) -> int:
         raise ValueError(f"estimate_triangles: area must be a positive number of m^2, got {area_m2}")
     if not (math.isfinite(size_m) and size_m > 0):
         raise ValueError(f"estimate_triangles: element size must be a positive number of metres, got {size_m}")
-    n = area_m2 / (math.sqrt(3.0) / 4.0 * size_m * size_m)
-    return int(math.ceil(n)) if math.isfinite(n) else 2 ** 62
+    n = area_m2 / (math.sqrt(3.0) / 4.0) / size_m / size_m      # in this order: h^2 may underflow to 0
+    return int(math.ceil(n)) if n < 2.0 ** 62 else 2 ** 62
 
 
 def mesh_memory_bytes(n_triangles: int) -> float:
