@@ -288,10 +288,13 @@ def _face_areas(f: _Faces) -> np.ndarray:
     return np.array(out)
 
 
-def merge_small_faces(f: _Faces, fraction: float, tol: float, where: str = "body") -> tuple[_Faces, int]:
-    """Glue every face smaller than ``fraction`` of the median face area to the neighbour it
-    shares most boundary with (the edges between them are dropped and the faces traced again),
-    until none is left or none can be glued. Returns the faces and how many were glued.
+def merge_small_faces(f: _Faces, fraction: float, tol: float, where: str = "body",
+                      on_support: Callable | None = None) -> tuple[_Faces, int]:
+    """Glue every face smaller than ``fraction`` of the median face area to the free neighbour
+    it shares most boundary with (a fixed one, with an outline edge where ``on_support(midpoints)``
+    holds, only when it has no free neighbour; the edges between them are dropped and the faces
+    traced again), until none is left or none can be glued. Returns the faces and how many were
+    glued. Gluing a piece to the fixed ground would turn a joint it rests on into a notch.
 
     Why: where joints meet the outline at a small angle they cut slivers (a few cm^2 under a
     brick's corner); a sliver resting on a joint steeper than its friction angle is the
@@ -307,6 +310,12 @@ def merge_small_faces(f: _Faces, fraction: float, tol: float, where: str = "body
             break
         inner = (f.left[:, 0] >= 0) & (f.left[:, 1] >= 0)
         L = np.linalg.norm(f.points[f.edges[:, 1]] - f.points[f.edges[:, 0]], axis=1)
+        fixed = np.zeros(len(areas), dtype=bool)
+        if on_support is not None and (~inner).any():
+            mid = 0.5 * (f.points[f.edges[~inner, 0]] + f.points[f.edges[~inner, 1]])
+            hit = np.asarray(on_support(mid), dtype=bool)
+            face = np.max(f.left[~inner], axis=1)
+            fixed[face[hit & (face >= 0)]] = True
         drop = np.zeros(len(f.edges), dtype=bool)
         for face in small[np.argsort(areas[small])]:
             mine = inner & ((f.left[:, 0] == face) | (f.left[:, 1] == face))
@@ -314,6 +323,8 @@ def merge_small_faces(f: _Faces, fraction: float, tol: float, where: str = "body
                 continue
             other = np.where(f.left[mine, 0] == face, f.left[mine, 1], f.left[mine, 0])
             shared = np.bincount(other, weights=L[mine], minlength=len(areas))
+            if (shared[~fixed] > 0).any():
+                shared[fixed] = 0.0
             best = int(np.argmax(shared))
             drop |= mine & ((f.left[:, 0] == best) | (f.left[:, 1] == best))
             glued += 1
@@ -350,6 +361,8 @@ def block_system(geometry: Geometry, supports: Sequence[str] | Callable = SUPPOR
     """
     tol = geometry.tolerance
     dfn = geometry.dfn()
+    support_test = supports if callable(supports) else \
+        (lambda mid: _on_support(mid, geometry.bounds, supports, tol))
     polys, bodies, fixed = [], [], []
     ia, ib, ends, normals, tags = [], [], [], [], []
     outline_edges = []      # (block, p, q) of edges on the outer face, for contacts between bodies
@@ -364,7 +377,8 @@ def block_system(geometry: Geometry, supports: Sequence[str] | Callable = SUPPOR
         f = polygonize(segs, labels.astype(np.int64), tol, where=f"body {b} ({body.name!r})")
         n_pruned += f.n_pruned
         if merge_below > 0:
-            f, glued = merge_small_faces(f, merge_below, tol, where=f"body {b} ({body.name!r})")
+            f, glued = merge_small_faces(f, merge_below, tol, where=f"body {b} ({body.name!r})",
+                                         on_support=support_test)
             n_glued += glued
         base = len(polys)
         polys += [f.points[loop] for loop in f.faces]
@@ -392,7 +406,7 @@ def block_system(geometry: Geometry, supports: Sequence[str] | Callable = SUPPOR
         oblk = np.array([o[0] for o in outline_edges])
         oseg = np.array([[o[1], o[2]] for o in outline_edges])
         mid = oseg.mean(axis=1)
-        hit = supports(mid) if callable(supports) else _on_support(mid, geometry.bounds, supports, tol)
+        hit = support_test(mid)
         fixed[np.unique(oblk[np.asarray(hit, dtype=bool)])] = True
         bodies_arr = np.array(bodies)
         ca, cb, ce, cn = _body_contacts(oblk, oseg, bodies_arr, tol)

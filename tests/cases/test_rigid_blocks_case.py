@@ -35,8 +35,8 @@ def test_slivers_are_glued_but_the_planar_wedge_is_not(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         g = four_slope_geometry("low", "coarse")
-    raw, glued = block_system(g), block_system(g, merge_below=0.05)
+    raw, glued = block_system(g), block_system(g, merge_below=0.01)
     assert glued.n_blocks < raw.n_blocks and glued.n_glued > 0
     assert glued.area.sum() == pytest.approx(raw.area.sum(), rel=1e-12)
     planar = planar_slope_geometry(10.0, **GEOMETRIES["no_crack"])
-    assert block_system(planar, merge_below=0.05).n_blocks == 2
+    assert block_system(planar, merge_below=0.01).n_blocks == 2
