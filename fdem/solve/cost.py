@@ -16,8 +16,9 @@ Two moments to check:
 The figures of this machine (2 cores, ``docs/benchmarks.md``):
 
 * :data:`SECONDS_PER_TRIANGLE_STEP`: a full intact step (crack elements, triangles,
-  integration) at 22.3 M triangle-steps per second on one thread; contact in a fragmented
-  mass is about 10x slower (2.4 M), so a runout costs more than this figure says.
+  integration) at 22.3 M triangle-steps per second on one thread, plus
+  :data:`SECONDS_PER_STEP_OVERHEAD` per step; contact in a fragmented mass is about 10x
+  slower (2.4 M), so a runout costs more than these figures say.
 * :func:`mesh_memory_bytes`: the process's peak resident memory (``resource.getrusage``
   ``ru_maxrss``) once the demo scene (:mod:`fdem.cases.quick_start`) has been meshed, started
   in static equilibrium (a sparse LU factorisation, the peak) and run for 20 steps, one fresh
@@ -48,7 +49,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 __all__ = ["CostEstimate", "estimate_cost", "estimate_triangles", "mesh_memory_bytes", "available_memory",
-           "check_mesh_budget", "dt_warning", "held_array_bytes", "SECONDS_PER_TRIANGLE_STEP",
+           "check_mesh_budget", "dt_warning", "held_array_bytes", "SECONDS_PER_TRIANGLE_STEP", "SECONDS_PER_STEP_OVERHEAD",
            "PEAK_BYTES_PER_TRIANGLE", "PEAK_REFERENCE_TRIANGLES", "PEAK_EXPONENT", "BASE_PEAK_BYTES",
            "DT_WARNING_RATIO"]
 
@@ -56,6 +57,12 @@ SECONDS_PER_TRIANGLE_STEP = 1.0 / 22.3e6
 """Wall seconds per triangle per step of a full intact step (crack elements, triangles,
 integration) on one thread of this machine: 22.3 M triangle-steps/s on 999,698 triangles
 (``docs/benchmarks.md``, ``bench_full_step.py``). Contact between fragments is not in it."""
+
+SECONDS_PER_STEP_OVERHEAD = 0.5e-3
+"""Wall seconds of a step that do not grow with the mesh (the Python side of a step: providers,
+guard, history), one thread: the quick-start scene's 1,503 triangles took 0.5-0.7 ms per damped
+step (``fdem.cases.common``), of which the triangles account for 0.07 ms at the rate above;
+measured again on its 929-triangle mesh at 1.0 ms/step with the machine loaded."""
 
 PEAK_BYTES_PER_TRIANGLE = 4.46e3
 """Peak resident memory per triangle above :data:`BASE_PEAK_BYTES` [bytes] of a scene meshed,
@@ -96,7 +103,8 @@ class CostEstimate:
         model (:func:`mesh_memory_bytes`)
     seconds_per_step : wall seconds per step [s]
     seconds_per_step_source : ``"measured"`` (a short run of this simulation) or
-        ``"benchmark"`` (:data:`SECONDS_PER_TRIANGLE_STEP` times the triangles)
+        ``"benchmark"`` (:data:`SECONDS_PER_STEP_OVERHEAD` plus :data:`SECONDS_PER_TRIANGLE_STEP`
+        times the triangles)
     simulated_seconds : the simulated time the wall time is for [s], or ``None``
     steps : steps for ``simulated_seconds`` (``None`` without it)
     wall_seconds : wall time for ``simulated_seconds`` [s] (``None`` without it)
@@ -286,8 +294,8 @@ def estimate_cost(sim, simulated_seconds: float | None = None, steps_per_second_
     simulated second only. Seconds per step: ``1 / steps_per_second_measured`` when given (a
     rate the caller measured); else, with ``measure_steps = n > 0``, ``n`` steps run now (about
     20 is enough; the simulation is restored afterwards, so nothing it holds changes); else the
-    benchmark rate :data:`SECONDS_PER_TRIANGLE_STEP` times the triangles (intact; a fragmenting
-    run costs more).
+    benchmark figures, :data:`SECONDS_PER_STEP_OVERHEAD` plus :data:`SECONDS_PER_TRIANGLE_STEP`
+    times the triangles (intact; a fragmenting run costs more).
     """
     if simulated_seconds is not None and not (math.isfinite(simulated_seconds) and simulated_seconds >= 0):
         raise ValueError(f"estimate_cost: simulated_seconds must be a non-negative number, got {simulated_seconds}")
@@ -306,7 +314,7 @@ def estimate_cost(sim, simulated_seconds: float | None = None, steps_per_second_
     elif measure_steps > 0:
         per_step, source = _measured_seconds_per_step(sim, int(measure_steps)), "measured"
     else:
-        per_step, source = SECONDS_PER_TRIANGLE_STEP * n_tri, "benchmark"
+        per_step, source = SECONDS_PER_STEP_OVERHEAD + SECONDS_PER_TRIANGLE_STEP * n_tri, "benchmark"
     steps = wall = None
     if simulated_seconds is not None:
         steps = int(math.ceil(simulated_seconds / dt - 1e-9))

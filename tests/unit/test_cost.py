@@ -48,7 +48,7 @@ def test_the_step_is_the_critical_step_times_the_fraction():
     assert est.steps == math.ceil(0.01 / est.dt - 1e-9)
     assert est.wall_seconds == pytest.approx(est.steps * est.seconds_per_step)
     assert est.seconds_per_step_source == "benchmark"
-    assert est.seconds_per_step == pytest.approx(cost.SECONDS_PER_TRIANGLE_STEP * 48)
+    assert est.seconds_per_step == pytest.approx(cost.SECONDS_PER_STEP_OVERHEAD + cost.SECONDS_PER_TRIANGLE_STEP * 48)
     assert (est.n_triangles, est.n_nodes, est.n_cracks) == (48, 144, sim.model.topology.n_cracks)
     d = est.as_dict()
     assert d["governing"] == est.governing and d["dt_limits"] == est.dt_limits
