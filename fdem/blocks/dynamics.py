@@ -83,12 +83,12 @@ class BlockDynamics:
     ``gravity`` [m/s^2] (a vector: tilt it to incline a plane), ``contact`` ``"hard"`` or
     ``"soft"`` (then ``k_n``, ``k_t`` [Pa/m]), and an optional ``base_acceleration(t) -> (ax, ay)``
     [m/s^2] of the supports: motion is computed relative to them (the free blocks feel
-    ``-m a_base``)."""
+    ``-m a_base``). ``factor``: strength-reduction factor F on ``c``, ``tan(phi)``, ``f_t``."""
 
     def __init__(self, system: BlockSystem, density: float, strengths: Mapping[int, Strength],
                  gravity=(0.0, -9.81), contact: str = "hard", k_n: float | None = None, k_t: float | None = None,
                  base_acceleration: Callable[[float], tuple] | None = None, fixed_point_tol: float = 1e-6,
-                 max_fixed_point: int = 25):
+                 max_fixed_point: int = 25, factor: float = 1.0):
         if contact not in ("hard", "soft"):
             raise BlockSystemError(f"contact must be 'hard' or 'soft', got {contact!r}")
         if contact == "soft" and not (k_n and k_n > 0 and k_t and k_t > 0):
@@ -118,7 +118,7 @@ class BlockDynamics:
         self.ra0 = p0 - s.centroid[self.a]       # point in a's frame
         self.rb0 = p0 - s.centroid[self.b]       # the same point in b's frame
         L = np.repeat(s.length[iface], 2)
-        mu, c, ft = interface_strength(np.repeat(s.tag[iface], 2), strengths)
+        mu, c, ft = interface_strength(np.repeat(s.tag[iface], 2), strengths, factor)
         self.mu, self.coh, self.ten = mu, c * L / 2, ft * L / 2      # [-], [N/m], [N/m] per point
         self.half_length = L / 2
         if contact == "soft":

@@ -76,7 +76,8 @@ def test_goodman_bray_regimes(theta, phi, b_over_h, regime):
         return
     assert not r.stable
     kind = r.mechanism.kind()
-    assert kind == ("sliding" if regime == "sliding" else "toppling")
+    # sliding and toppling are both mechanisms of the slide+topple regime: the solver gives one
+    assert kind in ({"sliding", "toppling"} if regime == "slide+topple" else {regime})
 
 
 @pytest.mark.parametrize("contact", ["hard", "soft"])
