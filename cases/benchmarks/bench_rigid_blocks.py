@@ -5,6 +5,7 @@
   block count), and the screen of the planar DFN ensemble against its FDEM factors of safety.
 * Closed forms: Hoek-Bray planar slopes, Goodman-Bray regimes on a grid of plane angles and
   block shapes, Newmark's sliding block.
+* Bonded blocks: the slopes with the intact rock cut into Voronoi cells (rock may break).
 * Soft against hard: the same scenes stepped with hard and with soft contacts (answers and
   cost): a block sliding, a block toppling, and the demo slope's blocks below and above their
   factor of safety.
@@ -12,8 +13,8 @@
 One thread (Clarabel's direct solver is sequential); the load average is recorded with every
 figure (the machine is shared).
 
-    python cases/benchmarks/bench_rigid_blocks.py            # about 2 minutes
-    python cases/benchmarks/bench_rigid_blocks.py --quick    # skips the spacing sweep and the demo dynamics
+    python cases/benchmarks/bench_rigid_blocks.py            # about 5 minutes
+    python cases/benchmarks/bench_rigid_blocks.py --quick    # skips bonded cells, spacing sweep, demo dynamics
 
 Writes docs/benchmarks/rigid_blocks.json and pictures in docs/rigid_blocks/.
 """
@@ -81,6 +82,30 @@ def static_scenes(records: list) -> dict:
         out[name] = r
         print(f"{name}: {r['n_blocks']} blocks, FoS {r['fos']}, {wall:.2f} s (load {ld:.1f})", flush=True)
     return out
+
+
+def bonded_scenes(records: list, cell: float = 1.5) -> None:
+    """The slopes again with the intact rock cut into bonded Voronoi cells of about ``cell`` m
+    (rock-bridge strength): mechanisms may now break the rock between the joints."""
+    from fdem.blocks.pictures import save_mechanism
+
+    for name in ("demo", "four-slopes-low-fine", "four-slopes-low-coarse", "four-slopes-high-fine",
+                 "four-slopes-high-coarse", "two-sets"):
+        sc = SCENES[name]
+        t0 = time.perf_counter()
+        r = analyse(sc.geometry(), sc.properties(), sc.unit_weight, intact_cell_size=cell)
+        wall = time.perf_counter() - t0
+        records.append(record(f"rigid-block FoS {name}, intact rock in bonded cells of {cell:g} m", wall, "s",
+                              mesh_size=r["n_blocks"], threads=1, n_interfaces=r["n_interfaces"], fos=r["fos"],
+                              bracket=r["bracket"], n_solves=r["n_solves"], seconds_blocks=r["seconds_blocks"],
+                              seconds_fos=r["seconds_fos"], fdem_bracket=sc.fdem,
+                              n_moving=(r["mechanism"] or {}).get("n_moving"),
+                              mechanism=(r["mechanism"] or {}).get("kind"), load_average=load()))
+        if r["fos_result"] is not None:
+            save_mechanism(PICTURES / f"{name}_cells_mechanism.png", r["system"], r["fos_result"].mechanism,
+                           f"{name}, bonded cells {cell:g} m: F = {r['fos']:.3f}, "
+                           f"{r['mechanism']['n_moving']} block(s) {r['mechanism']['kind']}")
+        print(f"{name} cells: {r['n_blocks']} blocks, FoS {r['fos']}, {wall:.1f} s", flush=True)
 
 
 def spacing_sweep(records: list) -> list:
@@ -273,6 +298,7 @@ def main(argv=None):
     static_scenes(records)
     ensemble_screen(records)
     if not args.quick:
+        bonded_scenes(records)
         spacing_sweep(records)
     soft_vs_hard(records, args.quick)
     save("rigid_blocks", records, load_average_start=start_load, load_average_end=load(),

@@ -13,6 +13,7 @@ already measured (docs/cases.md, docs/failure_workflow.md; not rerun here).
     fdem run rigid-blocks --scene all --out runs/rigid       # every scene, about a minute
     fdem run rigid-blocks --scene four-slopes-low-fine --pga 0.3 --frequency 2 --cycles 3
     fdem run rigid-blocks --ensemble docs/ensembles/realizations.csv   # screen an ensemble
+    fdem run rigid-blocks --scene four-slopes-high-fine --intact-cells 1.5   # rock may break (bonded cells)
 
 Writes ``summary.json`` and, per scene, ``<scene>_mechanism.png`` (fixed blocks grey, moving
 ones coloured by speed, arrows their velocities, rock bridges red).
@@ -155,11 +156,12 @@ def sine_record(pga: float, frequency: float, cycles: float, samples_per_cycle: 
 
 def analyse(geometry, properties: dict, unit_weight: float, lower: float = 0.2, upper: float = 100.0,
             rtol: float = 1e-3, record=None, contact_friction: float | None = None, residual: bool = False,
-            merge_below: float = MERGE_BELOW) -> dict:
+            merge_below: float = MERGE_BELOW, intact_cell_size: float | None = None) -> dict:
     """Blocks, factor of safety and mechanism (and, with ``record = (t, a)``, the yield
     acceleration towards the face and the Newmark displacement of its mechanism; with
-    ``residual``, the factor of safety with the joints' cohesion and tensile strength spent) of
-    a slope. Returns a plain dict; ``"system"``, ``"fos_result"`` and ``"yield_result"`` hold
+    ``residual``, the factor of safety with the joints' cohesion and tensile strength spent;
+    with ``intact_cell_size`` [m], the intact rock cut into bonded Voronoi cells that may break)
+    of a slope. Returns a plain dict; ``"system"``, ``"fos_result"`` and ``"yield_result"`` hold
     the objects."""
     from fdem.blocks.assembly import block_system
     from fdem.blocks.limit import BlockSystemError, StandsBeyondBracket, factor_of_safety, statics
@@ -169,7 +171,7 @@ def analyse(geometry, properties: dict, unit_weight: float, lower: float = 0.2, 
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the DFN's dropped short pieces: the mesher's concern
-        system = block_system(geometry, merge_below=merge_below)
+        system = block_system(geometry, merge_below=merge_below, intact_cell_size=intact_cell_size)
     st = statics(system, unit_weight)
     strengths = strengths_from(properties, contact_friction)
     t1 = time.perf_counter()
@@ -280,6 +282,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--merge-below", type=float, default=MERGE_BELOW, metavar="FRACTION",
                         help=f"glue blocks smaller than this fraction of the median block to a neighbour "
                              f"(default {MERGE_BELOW}; 0: keep every sliver)")
+    parser.add_argument("--intact-cells", type=float, default=None, metavar="SIZE",
+                        help="also cut the intact rock into bonded Voronoi cells of about SIZE m (rock-bridge "
+                             "strength), so that a mechanism may break the rock between the joints")
     parser.add_argument("--ensemble", type=Path, default=None, metavar="CSV",
                         help="screen an ensemble instead: the rigid-block factor of safety of every realization "
                              "of the planar DFN ensemble in this realizations.csv, beside its FDEM one")
@@ -289,6 +294,8 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     if not 0 < args.lower < args.upper:
         parser.error(f"need 0 < --lower < --upper, got {args.lower}, {args.upper}")
+    if args.intact_cells is not None and not (math.isfinite(args.intact_cells) and args.intact_cells > 0):
+        parser.error(f"--intact-cells must be a positive size in metres, got {args.intact_cells}")
     if not 0 <= args.merge_below < 1:
         parser.error(f"--merge-below must be a fraction in [0, 1), got {args.merge_below}")
     if not 1e-8 <= args.rtol < 1:
@@ -321,7 +328,7 @@ def main(argv=None) -> dict:
         sc = SCENES[name]
         try:
             r = analyse(sc.geometry(), sc.properties(), sc.unit_weight, args.lower, args.upper, args.rtol, record,
-                        residual=True, merge_below=args.merge_below)
+                        residual=True, merge_below=args.merge_below, intact_cell_size=args.intact_cells)
         except (BlockSystemError, ConeSolverError) as err:
             print(f"{name}: {err}")
             summary["scenes"][name] = {"error": str(err)}

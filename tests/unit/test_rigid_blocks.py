@@ -188,3 +188,29 @@ def test_a_solver_without_an_answer_raises():
     prob = ConeProblem(A, np.r_[-st.loads(), np.zeros(4)], np.zeros(4), 3, 4, 0)
     with pytest.raises(ConeSolverError, match="status MaxIterations"):
         solve_cone(prob, max_iter=1, what="test")
+
+
+def test_intact_cells_can_only_lower_the_factor_of_safety():
+    # cutting the intact rock into bonded cells adds mechanisms and removes none: any admissible
+    # set of cell forces sums to one of the joint blocks, so F(cells) <= F(joints); with
+    # intact rock far stronger than the joints the joints' mechanism is kept
+    import warnings
+
+    from fdem.cases import quick_start
+    from fdem.blocks.strength import strengths_from
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geo = quick_start.geometry()
+        joints = block_system(geo)
+        cells = block_system(geo, intact_cell_size=2.0)
+    assert cells.n_blocks > 3 * joints.n_blocks
+    assert cells.area.sum() == pytest.approx(joints.area.sum(), rel=1e-9)
+    props = quick_start.property_sets()
+    S = strengths_from(props)
+    weak = {**S, 0: Strength(2e3, 15.0, 0.5e3)}     # intact rock weaker than the joints
+    f_joints = factor_of_safety(statics(joints, 25e3), S).fos
+    f_cells = factor_of_safety(statics(cells, 25e3), S).fos
+    f_weak = factor_of_safety(statics(cells, 25e3), weak).fos
+    assert f_cells == pytest.approx(f_joints, rel=2e-3)
+    assert f_weak < 0.9 * f_joints
