@@ -407,7 +407,9 @@ def block_system(geometry: Geometry, supports: Sequence[str] | Callable = SUPPOR
         outline = body.edges
         joints = dfn.segments[dfn.body == b]
         cells = np.zeros((0, 2, 2)) if intact_cell_size is None else intact_cells(body, intact_cell_size, seed + b)
-        bridges = rock_bridges(joints, np.concatenate([outline, cells]), tol)
+        # bridges as without cells: the joint blocks' interfaces stay a subset of the cells',
+        # so the cells only add mechanisms (F with cells <= F without)
+        bridges = rock_bridges(joints, outline, tol)
         all_bridges.append(bridges)
         segs = np.concatenate([outline, joints, bridges, cells])
         labels = np.r_[np.full(len(outline), _OUTLINE), dfn.set_id[dfn.body == b],
