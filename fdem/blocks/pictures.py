@@ -71,6 +71,6 @@ def save_mechanism(path: Path, system: BlockSystem, mechanism: Mechanism | None,
     fig, ax = plt.subplots(figsize=size)
     draw_mechanism(ax, system, mechanism, title)
     fig.tight_layout()
-    fig.savefig(path, dpi=150)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)

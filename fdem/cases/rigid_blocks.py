@@ -29,7 +29,7 @@ from typing import Callable
 
 import numpy as np
 
-from fdem.cases.common import case_parser
+from fdem.cases.common import case_parser, check_common
 
 __all__ = ["NAME", "MERGE_BELOW", "Scene", "SCENES", "two_set_geometry", "two_set_property_sets", "analyse", "sine_record",
            "rigid_block_line", "print_rigid_blocks", "screen_ensemble", "main"]
@@ -292,6 +292,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--frequency", type=float, default=2.0, help="its frequency [Hz]")
     parser.add_argument("--cycles", type=float, default=3.0, help="its number of cycles")
     args = parser.parse_args(argv)
+    check_common(parser, args)      # the shared options (--threads, --max-time: no use here, but checked)
     if not 0 < args.lower < args.upper:
         parser.error(f"need 0 < --lower < --upper, got {args.lower}, {args.upper}")
     if args.intact_cells is not None and not (math.isfinite(args.intact_cells) and args.intact_cells > 0):
@@ -305,7 +306,7 @@ def main(argv=None) -> dict:
     from fdem.blocks.cone import ConeSolverError
     from fdem.blocks.limit import BlockSystemError
     from fdem.blocks.pictures import save_mechanism
-    from fdem.io.jsonable import write_json
+    from fdem.io.jsonable import jsonable, write_json
 
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -316,7 +317,7 @@ def main(argv=None) -> dict:
         for r in rows:
             print(f"realization {r['index']:3d}: {r['n_blocks']} blocks, rigid-block FoS {r['rigid_fos']:.3f} "
                   f"({r['seconds']:.2f} s), FDEM {r['fdem_fos']:.3f} ({r['fdem_seconds']:.0f} s)")
-        summary = {"case": NAME, "ensemble": str(args.ensemble), "realizations": rows}
+        summary = jsonable({"case": NAME, "ensemble": str(args.ensemble), "realizations": rows})
         write_json(out / "summary.json", summary)
         print(f"wrote {out / 'summary.json'}")
         return summary
@@ -354,6 +355,9 @@ def main(argv=None) -> dict:
             save_mechanism(out / f"{name}_mechanism.png", r["system"], r["fos_result"].mechanism,
                            f"{name}: F = {r['fos']:.3f}, {r['mechanism']['n_moving']} blocks "
                            f"{r['mechanism']['kind']}")
+    failed = [n for n, r in summary["scenes"].items() if "error" in r]
+    summary["outcome"] = "error" if failed else "finished"   # a scene without an answer fails the command
+    summary = jsonable(summary)     # what summary.json holds, returned as such
     write_json(out / "summary.json", summary)
-    print(f"wrote {out / 'summary.json'}")
+    print(f"wrote {out / 'summary.json'}" + (f"; no answer for {', '.join(failed)}" if failed else ""))
     return summary
