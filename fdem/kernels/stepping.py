@@ -193,7 +193,7 @@ def n_blocks(n: int) -> int:
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
 def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
-                  gx, gy, dt, alpha, local, use_viscous, ledger, partial, inertia):
+                  gx, gy, dt, alpha, local, use_viscous, ledger, partial, inertia, ranges=None):
     """One fused step on an exploded mesh (node ``3t + k`` is corner ``k`` of triangle ``t``).
 
     Each triangle computes its forces and advances its own three nodes: race-free, one pass
@@ -202,8 +202,11 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
     which cost a little and are only needed on output steps. ``partial`` is a work array of
     shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia`` (n_nodes, 2) gives the nodes'
     inertial masses and their inverses of a density-scaled stage, or ``None`` (the triangles' own lumped masses;
-    gravity always acts on those). Returns the sums named in :data:`LEDGER_FIELDS` (state
-    energies 0 unless ``ledger``).
+    gravity always acts on those). ``ranges`` (n_items, 2) int64 lists the triangles to step as
+    half-open ranges ``[start, end)``, one work item each (``partial`` then has ``n_items`` rows),
+    or ``None``: every triangle, in blocks of :data:`BLOCK` (the triangles left out are asleep,
+    :mod:`fdem.solve.sleeping`). Returns the sums named in :data:`LEDGER_FIELDS` (state
+    energies 0 unless ``ledger``; sums over the stepped triangles only).
     """
     c_keep = 1.0 - 0.5 * alpha * dt
     c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
@@ -225,7 +228,13 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
         i_e = 0.0
         i_l = 0.0
         n_bad = 0
-        for t in range(blk * BLOCK, min(n_tri, (blk + 1) * BLOCK)):
+        if ranges is None:
+            t_lo = blk * BLOCK
+            t_hi = min(n_tri, (blk + 1) * BLOCK)
+        else:
+            t_lo = ranges[blk, 0]
+            t_hi = ranges[blk, 1]
+        for t in range(t_lo, t_hi):
             i = 3 * t
             r = triangle_response(tc, t, x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1], x[i + 2, 0], x[i + 2, 1],
                                   v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1],
@@ -302,12 +311,13 @@ def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy,
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
-def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia):
+def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia, ranges=None):
     """Fast path of :func:`step_exploded`: elastic triangles, gravity, interaction forces
     (``f_int`` an array, or ``None`` when there are no providers), damping (``(alpha, local)``
     or ``None``), inertial masses of a density-scaled stage (``inertia`` (n_nodes, 2): masses and inverses, or ``None``)
     and constraints; no viscosity, external loads or state energies. ``None``
     arguments compile to specialisations without that code (numba prunes the branches).
+    ``ranges``: the triangles to step, as in :func:`step_exploded` (``None``: all).
 
     Returns ``(reaction_early, reaction_late, interaction_early, interaction_late,
     damping_early, damping_late, n_inverted, kinetic)`` (``kinetic`` as in :data:`LEDGER_FIELDS`).
@@ -324,7 +334,13 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
         d_l = 0.0
         kin = 0.0
         n_bad = 0
-        for t in range(blk * BLOCK, min(n_tri, (blk + 1) * BLOCK)):
+        if ranges is None:
+            t_lo = blk * BLOCK
+            t_hi = min(n_tri, (blk + 1) * BLOCK)
+        else:
+            t_lo = ranges[blk, 0]
+            t_hi = ranges[blk, 1]
+        for t in range(t_lo, t_hi):
             i = 3 * t
             b00 = tc[t, TC_B00]
             b01 = tc[t, TC_B01]
