@@ -272,6 +272,8 @@ class CrackSet:
             if np.any(rank > 1):
                 raise ValueError("a node belongs to more than two crack elements: topology is not exploded")
             self._node_map[nf, rank] = cf
+        self._awake: np.ndarray | None = None  # (n,) bool, internal order: elements evaluated; None: all
+        self._carry_broken = np.zeros(0, dtype=np.int64)  # broken outside add_forces, handed on by the next call
         self._set_active(np.arange(n, dtype=np.int64))
 
     # ------------------------------------------------------------------ constants
@@ -318,6 +320,9 @@ class CrackSet:
     _elastic_only = False
 
     def _fill_constants(self) -> None:
+        # counts the changes of the constants (strength reduction, hold elastic): sleeping
+        # regions (fdem.solve.sleeping) wake when the strengths change
+        self.constants_version = getattr(self, "constants_version", -1) + 1
         """Write the per-element constant rows for the current reduction factor and hold state.
 
         Damaged ends keep their secant stiffness (:func:`fdem.kernels.cracks.remap_damage`), so
@@ -436,6 +441,49 @@ class CrackSet:
         self._colour_ptr = np.searchsorted(self._colour[self._active], np.arange(n_col + 1)).astype(np.int64)
         if self.scheme == "gather":
             self._node_list = np.unique(self._nodes[self._active].ravel()).astype(np.int64)
+        self._refresh_run()
+
+    def _refresh_run(self) -> None:
+        """The elements :meth:`add_forces` evaluates: the live ones, less those :meth:`set_awake` left out."""
+        awake = getattr(self, "_awake", None)
+        if awake is None:
+            self._run, self._run_ptr = self._active, self._colour_ptr
+            return
+        self._run = np.ascontiguousarray(self._active[awake[self._active]])
+        n_col = int(self._colour_ptr.shape[0] - 1)
+        self._run_ptr = np.searchsorted(self._colour[self._run], np.arange(n_col + 1)).astype(np.int64)
+
+    def set_awake(self, awake: np.ndarray | None) -> None:
+        """Evaluate only the elements with ``awake`` True ((n,) bool, topology order) in
+        :meth:`add_forces`; ``None``: all live elements. The elements left out are those between
+        two sleeping regions (:mod:`fdem.solve.sleeping`): their nodes do not move, so their
+        forces do not change, and the caller adds them from :meth:`add_element_forces`."""
+        if awake is not None and self.scheme != "colour":
+            raise ValueError("only the colour scheme evaluates a subset of the crack elements")
+        self._awake = None if awake is None else np.ascontiguousarray(np.asarray(awake, dtype=bool)[self._perm])
+        self._refresh_run()
+
+    @property
+    def n_evaluated(self) -> int:
+        """Live elements that :meth:`add_forces` evaluates (all of them unless :meth:`set_awake` left some out)."""
+        return int(self._run.shape[0])
+
+    def add_element_forces(self, x: np.ndarray, f: np.ndarray, ids: np.ndarray, step: int) -> None:
+        """Update the live elements among ``ids`` (topology order) at ``x`` and add their forces
+        into ``f`` (n_nodes, 2) [N/m], as :meth:`add_forces` does for the others. An element that
+        breaks is registered here and handed to contact by the next :meth:`add_forces`."""
+        ids = np.asarray(ids, dtype=np.int64)
+        internal = self._inv[ids]
+        live = np.zeros(self.n_cracks, dtype=bool)
+        live[self._active] = True
+        internal = np.ascontiguousarray(np.sort(internal[live[internal]]))
+        if internal.size == 0:
+            return
+        nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
+                                   self._offset, self._dil, internal, self._broke_flag)
+        if nb:
+            self._register_breaks(x, step)
+            self._carry_broken = np.union1d(self._carry_broken, self.newly_broken)
 
     @property
     def active(self) -> np.ndarray:
@@ -471,15 +519,21 @@ class CrackSet:
             self._time += (step - self._last_step) * dt
         self._last_step = step
         self._x_last = x
-        if self._active.size == 0:
+        carry, self._carry_broken = self._carry_broken, self._carry_broken[:0]
+        self._add_forces(x, f, step)
+        if carry.size:
+            self.newly_broken = np.union1d(carry, self.newly_broken)
+
+    def _add_forces(self, x: np.ndarray, f: np.ndarray, step: int) -> None:
+        if self._run.size == 0:
             self.newly_broken = np.zeros(0, dtype=np.int64)
             return
-        if self._active.size < self.parallel_min:
+        if self._run.size < self.parallel_min:
             nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                       self._offset, self._dil, self._active, self._broke_flag)
+                                       self._offset, self._dil, self._run, self._broke_flag)
         elif self.scheme == "colour":
             nb = K.crack_forces_coloured(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                         self._offset, self._dil, self._active, self._colour_ptr, self._broke_flag)
+                                         self._offset, self._dil, self._run, self._run_ptr, self._broke_flag)
         else:
             nb = K.crack_forces_store(x, self._nodes, self._const, self._status, self._state, self._diss,
                                       self._offset, self._dil, self._active, self._fe, self._broke_flag)
@@ -630,6 +684,7 @@ class CrackSet:
             "reduction": float(self.interfaces.reduction),
             "strength_multiplier": self.strength_multiplier.copy(),
             "x_last": None if self._x_last is None else np.array(self._x_last, dtype=np.float64),
+            "carry_broken": self._carry_broken.copy(),
         }
         if self.scheme == "gather":
             d["fe"] = self._fe.copy()
@@ -677,6 +732,7 @@ class CrackSet:
             self._x_last = x
         else:
             self._x_last = None if d["x_last"] is None else np.array(d["x_last"], dtype=np.float64)
+        self._carry_broken = np.array(d.get("carry_broken", np.zeros(0)), dtype=np.int64)
         active = np.array(d["active"], dtype=np.int64)
         self._set_active(active if move is None else np.sort(move[active]))
 
