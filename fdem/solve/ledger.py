@@ -35,6 +35,9 @@ class EnergyLedger:
         # Kinetic energy added by changing the inertial masses at fixed velocities
         # (Simulation.set_density_scaling), booked the same way.
         self.mass_change_work = 0.0
+        # Kinetic energy removed by setting the velocities of a region that falls asleep to zero
+        # (fdem.solve.sleeping), booked as dissipated like damping work.
+        self.sleep_dissipation = 0.0
         self.first_early: dict[str, float] | None = None
         self.total0: float | None = None
         self.scale = 0.0
@@ -61,10 +64,11 @@ class EnergyLedger:
         row.update(c)
         row.update(provider_terms)
         held = row["kinetic"] + row["strain"] + row["gravity_potential"] + row["load_potential"]
-        spent = row["damping_dissipation"] + row["viscous_dissipation"]
+        spent = row["damping_dissipation"] + row["viscous_dissipation"] + self.sleep_dissipation
         interactions = sum(provider_terms.values()) if providers_complete else -row["interaction_work"]
         row["gravity_change_work"] = self.gravity_change_work
         row["mass_change_work"] = self.mass_change_work
+        row["sleep_dissipation"] = self.sleep_dissipation
         total = (held + spent + interactions - row["boundary_work"] - self.gravity_change_work
                  - self.mass_change_work)
         if self.total0 is None:
