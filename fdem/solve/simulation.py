@@ -60,6 +60,7 @@ from fdem.io import history as history_file
 from fdem.physics import elastic as elastic
 from fdem.solve.damping import Damping, NO_DAMPING
 from fdem.solve import density_scaling
+from fdem.solve.sleeping import SleepPolicy, Sleeping
 from fdem.solve.ledger import EnergyLedger, work_halves
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation"]
@@ -168,12 +169,17 @@ class Simulation:
         (default 0.01, :mod:`fdem.solve.density_scaling`); ``None`` or 0 keeps the real masses
         in every stage. Stages switch scaling on and off (:func:`fdem.workflow.stages.run_stage`,
         :meth:`set_density_scaling`); an exploded mesh and an automatic time step are needed.
+    sleeping : bool or :class:`~fdem.solve.sleeping.SleepPolicy`, optional
+        Regions at rest stop being stepped until a force reaches them or the load changes
+        (:mod:`fdem.solve.sleeping`); ``True`` takes the default policy. Default off. Needs an
+        exploded mesh and gravity. :attr:`sleeping` holds the state (``None`` when off).
     """
 
     def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
                  output_fields=None, compression: str | None = None, time_cap: float | None = None,
-                 density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET):
+                 density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET,
+                 sleeping: bool | SleepPolicy | None = None):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         if density_scaling is not None and not (math.isfinite(density_scaling) and 0.0 <= density_scaling <= 1.0):
@@ -243,6 +249,8 @@ class Simulation:
         self.dt = self._choose_dt()
         self.add_monitor("max_speed", lambda s: float(np.sqrt((s.state.v ** 2).sum(1)).max()))
         self.add_monitor("max_displacement", lambda s: float(np.sqrt(((s.state.x - s.x0) ** 2).sum(1)).max()))
+        self.sleeping: Sleeping | None = None
+        self.set_sleeping(sleeping)
 
     # ------------------------------------------------------------------ setup
     def add_provider(self, provider) -> None:
@@ -352,6 +360,23 @@ class Simulation:
         self.dt = self._choose_dt()
         return self.inertia is not None
 
+    # ------------------------------------------------------------------ sleeping
+    def set_sleeping(self, sleeping: bool | SleepPolicy | None) -> None:
+        """Switch region sleeping on (``True`` or a :class:`~fdem.solve.sleeping.SleepPolicy`) or
+        off (every region awake again); on, the history gets an ``asleep_fraction`` column."""
+        if self.sleeping is not None:
+            self.sleeping.wake_all(self)
+            self.sleeping = None
+        if sleeping:
+            self.sleeping = Sleeping(self, sleeping if isinstance(sleeping, SleepPolicy) else SleepPolicy())
+            self.add_monitor("asleep_fraction", lambda s: s.sleeping.fraction_asleep if s.sleeping else 0.0)
+
+    def wake(self) -> None:
+        """Wake every sleeping region (:mod:`fdem.solve.sleeping`): call it after changing supports,
+        prescribed velocities or loads by hand (gravity, strengths and masses wake by themselves)."""
+        if self.sleeping is not None:
+            self.sleeping.wake_all(self)
+
     @property
     def time_capped(self) -> bool:
         """True when the run has reached its :attr:`time_cap`: a stage that ended there says
@@ -368,15 +393,33 @@ class Simulation:
         st = self.state
         x, v, dt = st.x, st.v, self.dt
         use_int = bool(self.providers)
+        sl = self.sleeping
+        if sl is not None and (damping.mass_proportional != 0.0 or damping.local != 0.0) \
+                and not sl.policy.damped_stages:  # a relaxation: every region awake (fdem.solve.sleeping)
+            if sl.any_asleep:
+                sl.wake_all(self)
+            sl.stepped += self.model.n_triangles
+            sl = None
         if use_int:
             f_int = self.f_interaction
-            f_int.fill(0.0)
+            if sl is None:
+                f_int.fill(0.0)
+            else:  # the frozen forces of sleeping regions' crack elements (zero when none sleeps)
+                sl.before_forces(self, f_int)
             for p in self.providers:
                 p.add_forces(x, v, f_int, dt, st.step)
+            if sl is not None:
+                sl.after_forces(self, f_int)  # wakes the regions a changed force reaches
             if ledger:  # provider energies at x_n, before the kernel moves the nodes
                 self._provider_terms = self._collect_provider_terms()
         else:
             f_int = self._empty
+            if sl is not None:
+                sl.before_forces(self, None)
+        ranges = None
+        if sl is not None:
+            ranges = sl.ranges()  # None: every region awake
+        partial = self._partial if ranges is None else sl.partial(len(ranges))
         if self.model.has_time_dependent_velocity:
             self.model.update_prescribed_velocity(self.v_prescribed, st.time + 0.5 * dt)
         f_ext = self.f_external if self.use_external else self._empty
@@ -387,7 +430,7 @@ class Simulation:
             # fast path (most steps of a dynamic or damped stage): no state energies needed
             r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
                 x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
-                self.flags, self.v_prescribed, gx, gy, dt, self._partial, self._inertia_kernel)
+                self.flags, self.v_prescribed, gx, gy, dt, partial, self._inertia_kernel, ranges)
             sums = StepSums(strain=0.0, kinetic=kin, gravity_moment=0.0, external_moment=0.0,
                             damping_early=d_e, damping_late=d_l, viscous_early=0.0, viscous_late=0.0,
                             reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
@@ -395,7 +438,11 @@ class Simulation:
         elif self.exploded:
             sums = StepSums._make(step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
                                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous,
-                                                ledger, self._partial, self._inertia_kernel))
+                                                ledger, partial, self._inertia_kernel, ranges))
+            if ranges is not None and ledger:  # the sleeping regions' frozen energies
+                s_strain, s_grav, s_ext = sl.asleep_sums()
+                sums = sums._replace(strain=sums.strain + s_strain, gravity_moment=sums.gravity_moment + s_grav,
+                                     external_moment=sums.external_moment + s_ext)
         else:
             ptr, corners = self._csr
             strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
@@ -420,6 +467,8 @@ class Simulation:
             self.last_row = self._record(sums, step_before, time_before)
         else:
             self.ledger.add_step(*work_halves(sums))
+        if sl is not None:  # after the books of this step: what sleeping removes counts from the next
+            sl.after_step(self, st.step % sl.check_steps(dt) == 0)
         return sums
 
     # ------------------------------------------------------------------ running
@@ -726,7 +775,8 @@ class Simulation:
                        "gravity_moment0": float(led.gravity_moment0),
                        "external_moment0": float(led.external_moment0),
                        "gravity_change_work": float(led.gravity_change_work),
-                       "mass_change_work": float(led.mass_change_work)},
+                       "mass_change_work": float(led.mass_change_work),
+                       "sleep_dissipation": float(led.sleep_dissipation)},
             "density_scaled": self.inertia is not None,
             "kinetic_peak": float(self.kinetic_peak),
             "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
@@ -735,6 +785,7 @@ class Simulation:
             "good": {"x": self._good.x.copy(), "v": self._good.v.copy(), "time": float(self._good.time),
                      "step": int(self._good.step)},
             "providers": [p.state_dict() for p in self.providers],
+            "sleeping": None if self.sleeping is None else self.sleeping.state_dict(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -772,6 +823,7 @@ class Simulation:
         led.external_moment0 = float(s["external_moment0"])
         led.gravity_change_work = float(s.get("gravity_change_work", 0.0))
         led.mass_change_work = float(s.get("mass_change_work", 0.0))
+        led.sleep_dissipation = float(s.get("sleep_dissipation", 0.0))
         self.kinetic_peak = float(d.get("kinetic_peak", 0.0))
         self.history[:] = [dict(r) for r in d["history"]]
         self._frames = int(d["frames"])
@@ -788,3 +840,9 @@ class Simulation:
         # the scaled masses follow from the restored crack set; the saved step is the one they give
         self.set_density_scaling(bool(d.get("density_scaled", False)), book=False)
         self.dt = float(d["dt"])
+        if self.sleeping is not None:  # a state saved without sleeping: every region awake
+            if d.get("sleeping") is not None:
+                self.sleeping.load_state_dict(d["sleeping"], self)
+            else:
+                self.sleeping.wake_all(self)
+                self.sleeping._signature = self.sleeping._load_signature(self)
