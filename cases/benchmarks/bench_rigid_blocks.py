@@ -39,7 +39,8 @@ from fdem.blocks.dynamics import BlockDynamics  # noqa: E402
 from fdem.blocks.limit import check_equilibrium, factor_of_safety, statics  # noqa: E402
 from fdem.blocks.newmark import mechanism_newmark  # noqa: E402
 from fdem.blocks.strength import Strength, strengths_from  # noqa: E402
-from fdem.cases.rigid_blocks import MERGE_BELOW, SCENES, analyse, screen_ensemble  # noqa: E402
+from fdem.blocks.slope import MERGE_BELOW, analyse  # noqa: E402
+from fdem.cases.rigid_blocks import SCENES, screen_ensemble  # noqa: E402
 from fdem.geometry.polygons import rectangle  # noqa: E402
 from fdem.geometry.section import Geometry  # noqa: E402
 from fdem.reference.newmark import newmark_response  # noqa: E402

@@ -9,7 +9,8 @@ contact problem as a second-order cone program (docs/rigid_blocks.md).
   reduction, pseudo-static yield acceleration, collapse mechanism.
 * :mod:`~fdem.blocks.dynamics`: hard and soft blocks, one cone program per implicit step.
 * :mod:`~fdem.blocks.newmark`: the Newmark displacement of a mechanism.
+* :mod:`~fdem.blocks.slope`: a slope's analysis in one call, and the line the slope cases print.
 * :mod:`~fdem.blocks.pictures`: blocks and mechanisms drawn.
 
-Floor 5: imports only ``geometry`` and ``reference`` of the package.
+Floor 5: imports only ``geometry`` and ``io`` of the package.
 """

@@ -230,7 +230,7 @@ def main(argv=None) -> dict:
     for w in caught:
         print(f"warning: {w.message}")
     if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
-        from fdem.cases.rigid_blocks import print_rigid_blocks
+        from fdem.blocks.slope import print_rigid_blocks
         print_rigid_blocks(geometry, four_slope_property_sets(), DENSITY * GRAVITY, args.out)
     elapsed = time.perf_counter() - t0
     threads = threads_for_mesh(args.threads, topo.n_triangles)

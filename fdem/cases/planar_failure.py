@@ -398,7 +398,7 @@ def main(argv=None) -> list:
     rows = []
     for name in args.geometry:
         if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
-            from fdem.cases.rigid_blocks import print_rigid_blocks
+            from fdem.blocks.slope import print_rigid_blocks
             print_rigid_blocks(planar_slope_geometry(HEIGHT, **GEOMETRIES[name]), property_sets(),
                                UNIT_WEIGHT, args.out / name)
         for size in args.size:

@@ -127,7 +127,7 @@ def main(argv=None) -> dict:
     check_common(parser, args)
     set_threads(args.threads)
     if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
-        from fdem.cases.rigid_blocks import print_rigid_blocks
+        from fdem.blocks.slope import print_rigid_blocks
         print_rigid_blocks(geometry(), property_sets(), DENSITY * GRAVITY, args.out)
 
     from fdem.geometry.polygons import slope_toe
