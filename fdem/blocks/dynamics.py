@@ -54,17 +54,21 @@ def _rot(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 @dataclass
 class StepInfo:
-    """What one step cost: cone programs ``solves``, interior-point ``iterations``, ``seconds``."""
+    """What one step cost: cone programs ``solves``, interior-point ``iterations``, ``seconds``;
+    ``converged``: the Coulomb fixed point settled within ``max_fixed_point`` solves (else the
+    step used the last solve, an associated-flow error of the size of the last change)."""
 
     solves: int
     iterations: int
     seconds: float
+    converged: bool = True
 
 
 @dataclass
 class History:
     """Recorded every ``every`` steps: ``t`` (m,), ``x`` (m, n, 2) centroids, ``theta`` (m, n),
-    ``v`` (m, n, 3); cost totals ``solves``, ``iterations``, ``seconds``."""
+    ``v`` (m, n, 3); cost totals ``solves``, ``iterations``, ``seconds``; ``unconverged``: steps
+    whose Coulomb fixed point did not settle."""
 
     t: list = field(default_factory=list)
     x: list = field(default_factory=list)
@@ -73,6 +77,7 @@ class History:
     solves: int = 0
     iterations: int = 0
     seconds: float = 0.0
+    unconverged: int = 0
 
     def arrays(self):
         return np.array(self.t), np.array(self.x), np.array(self.theta), np.array(self.v)
@@ -229,7 +234,7 @@ class BlockDynamics:
             self.q_t = p[t_idx] / dt
         self.shift = shift
         self.t += dt
-        return StepInfo(solves, its, time.perf_counter() - t0)
+        return StepInfo(solves, its, time.perf_counter() - t0, bool(done))
 
     def run(self, t_end: float, dt: float, every: int = 1) -> History:
         """Step to ``t_end`` [s] with ``dt`` [s], recording every ``every`` steps."""
@@ -243,6 +248,7 @@ class BlockDynamics:
             h.solves += info.solves
             h.iterations += info.iterations
             h.seconds += info.seconds
+            h.unconverged += not info.converged
             if (i + 1) % every == 0 or i == n - 1:
                 self._record(h)
         return h

@@ -98,6 +98,7 @@ def test_block_on_incline_slides_and_sticks(contact, theta, phi):
     assert slide == pytest.approx(exact * (1 + 1 / n), rel=1e-3, abs=1e-6)
     assert abs(h.x[-1][i, 1] - h.x[0][i, 1]) < 1e-5        # no dilation: Coulomb, not associated
     assert abs(h.theta[-1][i]) < 1e-5
+    assert h.unconverged == 0
 
 
 @pytest.mark.parametrize("contact", ["hard", "soft"])
