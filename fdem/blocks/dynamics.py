@@ -31,7 +31,6 @@ tumble away and meet new neighbours.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
