@@ -13,7 +13,10 @@ numbers to the last bit.
   file in the same directory, flushed, fsynced, then ``os.replace``): a crash while writing
   leaves the previous checkpoint intact. Arrays go into a compressed ``.npz``; scalars, lists
   and dicts into a JSON document stored inside it (floats round-trip exactly), with a format
-  version and a fingerprint of the mesh; a checkpoint of another mesh is refused.
+  version, a fingerprint of the mesh and one of the model (materials, supports, gravity, crack
+  property sets, heterogeneity, providers and their parameters); a checkpoint of another mesh or
+  another model is refused, naming what differs. A ``context`` (any JSON-able dict with arrays,
+  e.g. the workflow's journal, :mod:`fdem.workflow.journal`) travels in the same file.
 * :func:`periodic` and :func:`chain`: ``Simulation.run(..., stop_when=...)`` calls
   ``stop_when(sim)`` on every history row; ``periodic(path, every_steps)`` is such a callable
   that writes a checkpoint when due and never stops the run, and ``chain`` combines it with a
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import Callable
 import numpy as np
 
-__all__ = ["FORMAT_VERSION", "mesh_fingerprint", "snapshot", "restore", "save_checkpoint", "read_checkpoint",
+__all__ = ["FORMAT_VERSION", "mesh_fingerprint", "model_fingerprint", "snapshot", "restore", "save_checkpoint", "read_checkpoint",
            "load_checkpoint", "periodic", "chain", "checkpointed_run", "continue_run"]
 
 
@@ -66,6 +69,59 @@ def mesh_fingerprint(sim) -> dict:
         h.update(np.ascontiguousarray(a).tobytes())
     return {"n_nodes": int(topo.n_nodes), "n_triangles": int(topo.n_triangles),
             "n_cracks": int(crack_nodes.shape[0]), "sha256": h.hexdigest()}
+
+
+def _digest(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(np.asarray(a))
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _text_digest(obj) -> str:
+    return hashlib.sha256(repr(obj).encode()).hexdigest()[:16]
+
+
+def model_fingerprint(sim) -> dict:
+    """What a restart must share with the run that saved the checkpoint, besides the mesh, as
+    short digests by part: ``materials`` (the triangles' constants: elastic moduli, density,
+    element damping, through :meth:`fdem.solve.model.Model.triangle_constants`),
+    ``supports`` (the model's support flags and prescribed velocities), ``gravity`` (the
+    model's own, [m/s^2]: stages scale it, the checkpoint's current gravity is restored),
+    ``providers`` (their kinds in order), ``crack_properties`` (the property set of every tag,
+    heterogeneity draws, scheme), ``contact`` (penalty, friction, damping and softening of
+    the contact set)."""
+    model = sim.model
+    fp = {"materials": _digest(model.triangle_constants()),
+          "supports": _digest(model.flags, model.v_prescribed),
+          "gravity": [float(g) for g in model.gravity],
+          "providers": [type(p).__name__ for p in sim.providers]}
+    cracks = getattr(sim, "cracks", None)
+    if cracks is not None:
+        sets = getattr(cracks.interfaces, "property_sets", {})
+        # (the crack set checks its own scheme and element order, with its own message)
+        fp["crack_properties"] = _text_digest((sorted((int(k), repr(v)) for k, v in sets.items()),
+                                               _digest(getattr(cracks, "strength_multiplier", np.zeros(0)))))
+    contact = getattr(sim, "contact", None)
+    if contact is not None:
+        fp["contact"] = _text_digest(tuple(repr(getattr(contact, a, None)) for a in (
+            "penalty", "tangential_ratio", "damping_ratio", "softening", "loose_fraction"))
+            + (_digest(getattr(contact, "mu_tri", np.zeros(0))),))
+    return fp
+
+
+_PART_NAMES = {"materials": "materials (elastic moduli, density or element damping)",
+               "supports": "supports (fixed or roller boundaries, prescribed velocities)",
+               "gravity": "gravity", "providers": "force providers",
+               "crack_properties": "crack-element property sets (strengths, penalties, heterogeneity)",
+               "contact": "contact parameters (penalty, friction, damping)"}
+
+
+def _model_differences(saved: dict, here: dict) -> list[str]:
+    return [f"{_PART_NAMES.get(k, k)}: saved {saved.get(k)!r}, here {here.get(k)!r}"
+            for k in sorted(set(saved) | set(here)) if saved.get(k) != here.get(k)]
 
 
 def _describe(fp: dict) -> str:
@@ -123,8 +179,12 @@ def _decode(obj, arrays):
     return obj
 
 
-def save_checkpoint(sim, path) -> Path:
+def save_checkpoint(sim, path, context: dict | None = None) -> Path:
     """Write the simulation's state to ``path`` atomically; returns the path.
+
+    ``context``: what the caller needs to resume besides the simulation (a workflow's journal
+    of finished stages and the runtime of the one in progress); arrays allowed, returned by
+    :func:`read_checkpoint` under ``"context"``.
 
     The file is a compressed ``.npz`` holding the arrays and one JSON document (scalars,
     lists, the history rows, the format version and the mesh fingerprint). It is written to a
@@ -134,7 +194,8 @@ def save_checkpoint(sim, path) -> Path:
     path = Path(path)
     arrays: dict[str, np.ndarray] = {}
     body = _encode(sim.state_dict(), arrays, "state")
-    meta = {"format_version": FORMAT_VERSION, "mesh": mesh_fingerprint(sim), "state": body}
+    meta = {"format_version": FORMAT_VERSION, "mesh": mesh_fingerprint(sim), "model": model_fingerprint(sim),
+            "state": body, "context": _encode(context, arrays, "context")}
     text = json.dumps(meta, allow_nan=True, separators=(",", ":"))
     arrays[_META] = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
     directory = path.parent if str(path.parent) else Path(".")
@@ -173,6 +234,11 @@ def read_checkpoint(path) -> dict:
     try:
         with np.load(path, allow_pickle=False) as z:
             if _META not in z.files:
+                if {"x", "v", "x0", "triangles"} <= set(z.files):
+                    raise ValueError("it is a state file (positions and velocities, for looking at), which "
+                                     "holds no crack, contact or ledger state to restart from; restart from "
+                                     "the run's checkpoint.npz (fdem run NAME --resume DIR) or "
+                                     "interrupted_state.npz")
                 raise ValueError(f"no {_META} entry")
             meta = json.loads(z[_META].tobytes().decode("utf-8"))
             arrays = {k: z[k] for k in z.files if k != _META}
@@ -183,23 +249,32 @@ def read_checkpoint(path) -> dict:
         raise ValueError(f"checkpoint {path} has format version {version!r}; this fdem reads version {FORMAT_VERSION}")
     try:
         meta["state"] = _decode(meta["state"], arrays)
+        meta["context"] = _decode(meta.get("context"), arrays)
     except KeyError as e:
         raise ValueError(f"checkpoint {path} is corrupt: array {e} is missing") from e
     return meta
 
 
-def load_checkpoint(sim, path) -> None:
+def load_checkpoint(sim, path) -> dict | None:
     """Restore the state saved by :func:`save_checkpoint` into ``sim``, a freshly built
-    simulation of the same scene. A checkpoint of another mesh is refused with a
-    ``ValueError`` naming both meshes' counts; a missing file raises ``FileNotFoundError``,
-    a corrupt one ``ValueError``."""
+    simulation of the same scene; returns the saved ``context`` (``None`` if none). A checkpoint
+    of another mesh is refused with a ``ValueError`` naming both meshes' counts, one of another
+    model with one naming every part that differs (:func:`model_fingerprint`; files written
+    before the model was fingerprinted are checked on their mesh only); a missing file raises
+    ``FileNotFoundError``, a corrupt one ``ValueError``."""
     meta = read_checkpoint(path)
     here = mesh_fingerprint(sim)
     saved = meta.get("mesh", {})
     if saved != here:
         raise ValueError(f"checkpoint {path} belongs to another mesh: saved with {_describe(saved)}, "
                          f"this simulation has {_describe(here)}")
+    if meta.get("model") is not None:
+        differences = _model_differences(meta["model"], model_fingerprint(sim))
+        if differences:
+            raise ValueError(f"checkpoint {path} belongs to another model on the same mesh; it differs in "
+                             + "; ".join(differences))
     sim.load_state_dict(meta["state"])
+    return meta.get("context")
 
 
 # ----------------------------------------------------------------------------- in the run loop
