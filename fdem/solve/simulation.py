@@ -63,7 +63,44 @@ from fdem.solve import density_scaling
 from fdem.solve.sleeping import SleepPolicy, Sleeping
 from fdem.solve.ledger import EnergyLedger, work_halves
 
-__all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation"]
+__all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation", "StopRequest",
+           "STOP"]
+
+
+class StopRequest:
+    """A stop asked for from outside the time loop (a signal handler), honoured at the next step
+    boundary so that the state a checkpoint saves is a whole step, never half of one (the crack
+    elements updated and the nodes not yet moved).
+
+    ``pending``: the name of the signal waiting to be honoured, or ``None``; ``received``: the
+    last signal asked for (the exit code of the command says which); ``running``: how many
+    :meth:`Simulation.run` loops are going (a request with none going cannot wait for a step
+    boundary, and :meth:`ask` says so)."""
+
+    def __init__(self):
+        self.pending: str | None = None
+        self.received: str | None = None
+        self.running = 0
+        self.forced = False  # a second signal stopped the loop mid-step: its state is no checkpoint
+
+    def ask(self, signal_name: str) -> bool:
+        """Ask the running loop to stop; False when no loop is running or a stop was already
+        asked for (the caller stops now: then :attr:`forced` says the state may be mid-step)."""
+        self.received = signal_name
+        if self.running and self.pending is None:
+            self.pending = signal_name
+            return True
+        self.forced = self.forced or bool(self.running)
+        return False
+
+    def honour(self) -> None:
+        """Raise the requested stop as ``KeyboardInterrupt`` (called between steps)."""
+        name, self.pending = self.pending, None
+        raise KeyboardInterrupt(f"signal {name}")
+
+
+STOP = StopRequest()
+"""The process's stop request (:func:`fdem.cases.common.stop_cleanly_on_signals` sets it)."""
 
 
 @runtime_checkable
@@ -105,8 +142,12 @@ class State:
 class InstabilityError(RuntimeError):
     """The run went unstable; the message says where, when, and what time step to try.
 
-    Attributes: ``step``, ``time``, ``triangle``, ``reason``, ``suggested_dt``, ``state_path``.
+    Attributes: ``step``, ``time``, ``triangle``, ``reason``, ``suggested_dt``, ``state_path``,
+    and ``kind``: ``"time step"`` or ``"crushing"``, which the evidence points to
+    (:meth:`Simulation._instability_kind`).
     """
+
+    kind = "time step"
 
     def __init__(self, message: str, step: int, time: float, triangle: int, reason: str,
                  suggested_dt: float, state_path: Path | None):
@@ -360,6 +401,13 @@ class Simulation:
         self.dt = self._choose_dt()
         return self.inertia is not None
 
+    def steps_to(self, t_end: float) -> int:
+        """Steps of the current ``dt`` from the current time to ``t_end`` [s], within the time cap
+        (what :meth:`run` takes for ``t_end``)."""
+        if self.time_cap is not None:
+            t_end = min(t_end, self.time_cap)
+        return max(0, int(math.ceil((t_end - self.state.time) / self.dt - 1e-9)))
+
     # ------------------------------------------------------------------ sleeping
     def set_sleeping(self, sleeping: bool | SleepPolicy | None) -> None:
         """Switch region sleeping on (``True`` or a :class:`~fdem.solve.sleeping.SleepPolicy`) or
@@ -476,7 +524,7 @@ class Simulation:
             output_every: int | None = None, history_every: int | None = None, stage: str | None = None,
             energy_tolerance: float | None = 0.05, checkpoint_every: int = 100,
             stop_when: Callable[["Simulation"], bool] | None = None, progress: bool | None = None,
-            final_output: bool = True) -> "Simulation":
+            final_output: bool = True, phase: int = 0) -> "Simulation":
         """Run one stage: ``n_steps`` steps, or until time ``t_end`` [s].
 
         Parameters
@@ -499,6 +547,11 @@ class Simulation:
             Override the simulation's progress-bar setting for this call.
         final_output : bool
             Write an output frame when the call ends (default True).
+        phase : int
+            Steps of this stage already taken before the call (a stage resumed from a
+            checkpoint): history rows, frames and good-state copies fall on the same steps as
+            in an uninterrupted run, which makes the resumed run bit-identical (history steps
+            use the ledger kernel, equal to the plain one only up to round-off).
         """
         damping = damping or NO_DAMPING
         self._stage = stage or f"stage{len({r['stage'] for r in self.history}) + 1}"
@@ -522,9 +575,10 @@ class Simulation:
 
             bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)
         bar_chunk = 0
+        STOP.running += 1
         try:
-            for k in range(n_steps):
-                is_ledger = (k % history_every == 0) or k == n_steps - 1
+            for k in range(phase, phase + n_steps):
+                is_ledger = (k % history_every == 0) or k == phase + n_steps - 1
                 step_before, time_before = self.state.step, self.state.time
                 sums = self.step(damping, ledger=is_ledger)
                 self._check(sums, step_before, time_before, is_ledger, energy_tolerance)
@@ -539,8 +593,10 @@ class Simulation:
                         break
                 if (k + 1) % checkpoint_every == 0:
                     self._good = self.state.copy()
-                if (k + 1) % output_every == 0 and k + 1 < n_steps:
+                if (k + 1) % output_every == 0 and k + 1 < phase + n_steps:
                     self.write_output()
+                if STOP.pending is not None:
+                    STOP.honour()
                 if bar is not None:
                     bar_chunk += 1
                     if bar_chunk >= 64:
@@ -549,9 +605,11 @@ class Simulation:
             if final_output:
                 self.write_output()
         except KeyboardInterrupt:
-            self._write_state("interrupted_state", self.state)
+            if not STOP.forced:  # a whole step: worth keeping
+                self._write_interrupted()
             raise
         finally:
+            STOP.running -= 1
             if bar is not None:
                 bar.update(bar_chunk)
                 bar.close()
@@ -616,11 +674,76 @@ class Simulation:
         path = self._write_state("last_good_state", self._good)
         saved = (f"; last good state (step {self._good.step}, t = {self._good.time:.6g} s) written to {path}"
                  if path else "")
+        kind, evidence = self._instability_kind(reason, triangle)
         msg = (f"unstable at step {step}, t = {time:.6g} s: {reason}; first bad triangle {triangle} "
-               f"near reference point ({where[0]:.4g}, {where[1]:.4g}) m{saved}. "
-               f"Time step {self.dt:.4g} s; try dt <= {suggested:.4g} s, check the stable_dt of the "
-               f"force providers and the penalties")
-        raise InstabilityError(msg, step, time, triangle, reason, suggested, path)
+               f"near reference point ({where[0]:.4g}, {where[1]:.4g}) m{saved}. ")
+        if kind == "crushing":
+            msg += (f"It looks like crushing, not the time step: {evidence}. The load squeezes the triangle flat "
+                    f"faster than anything resists it (a load far above what the rock can carry, a gravity or "
+                    f"density factor too high, a penalty too soft for the load), and a smaller step is "
+                    f"unlikely to change when and where it fails (a run with dt <= {suggested:.4g} s that fails "
+                    f"at the same time and place confirms it)")
+        else:
+            msg += (f"It looks like a time-step instability: {evidence}. Time step {self.dt:.4g} s; try "
+                    f"dt <= {suggested:.4g} s, check the stable_dt of the force providers and the penalties")
+        err = InstabilityError(msg, step, time, triangle, reason, suggested, path)
+        err.kind = kind
+        raise err
+
+    def _instability_kind(self, reason: str, triangle: int) -> tuple[str, str]:
+        """``("crushing" | "time step", evidence)`` for a failed step, from what the failure
+        leaves: a step above the stable one makes the highest mode grow geometrically, so the
+        ledger books energy created without work and the nodes reach speeds above the P-wave
+        speed ``c_p = sqrt((lambda + 2 mu) / rho)`` within a few steps; a triangle crushed by its
+        load inverts while the ledger stays balanced and its nodes move slower than ``c_p``
+        (measured: a column under 10^4 g inverts the same triangle at t = 3.41 ms with dt and
+        dt / 4, its nodes at 259 m/s against c_p = 693 m/s and a balance error of 1e-5; a step
+        1.05x and 1.5x critical blows up with balance errors of 100 % or speeds far above c_p)."""
+        if reason.startswith("energy growing"):
+            return "time step", "the energy ledger grew without work"
+        lam, mu = self.model.lame_arrays()
+        rho = self.model.property_array("density")
+        c_p = float(np.sqrt((lam + 2.0 * mu) / rho)[triangle])
+        with np.errstate(all="ignore"):
+            speed = float(np.sqrt((self.state.v[self.triangles[triangle]] ** 2).sum(1)).max())
+        balance = float(self.history[-1]["balance_error_relative"]) if self.history else math.nan
+        if math.isfinite(speed) and speed < c_p and (not self.history or abs(balance) < 0.01):
+            return "crushing", (f"its nodes move at {speed:.3g} m/s, below the P-wave speed {c_p:.3g} m/s, and the "
+                                f"energy ledger was balanced ({abs(balance) if self.history else 0.0:.2g} of its scale "
+                                "at the last history row)")
+        return "time step", (f"its nodes move at {speed:.3g} m/s against a P-wave speed of {c_p:.3g} m/s"
+                             + (f", and the ledger's balance error was {balance:.2g} of its scale" if self.history else ""))
+
+    def _write_interrupted(self) -> Path | None:
+        """``interrupted_state.npz``: a full checkpoint of the state the run stopped in (loadable
+        with :func:`fdem.solve.checkpoint.load_checkpoint`), and its ``.vtu`` to look at."""
+        if self.out_dir is None:
+            return None
+        from fdem.solve.checkpoint import save_checkpoint
+
+        path = save_checkpoint(self, self.out_dir / "interrupted_state.npz")
+        fields = self.fields()
+        out.write_vtu(self.out_dir / "interrupted_state.vtu", self.state.x, self.triangles,
+                      point_data=fields["point"], cell_data=fields["cell"])
+        return path
+
+    def continue_outputs(self) -> None:
+        """After a restart into the output folder of the run that wrote the checkpoint: keep that
+        run's frames up to the checkpoint in the ``.pvd`` series (later ones, written after the
+        checkpoint, are dropped and will be written again) and rewrite ``history.csv`` with the
+        checkpoint's rows, so the series and the history read as one uninterrupted run."""
+        if self.out_dir is None:
+            return
+        from fdem.io.vtk import read_pvd
+
+        for series in (self._series, self._crack_series):
+            if series is not None and series.pvd_path.exists():
+                series.frames = [(t, p.name) for t, p in read_pvd(series.pvd_path)][: self._frames]
+        if self._history_writer is not None:
+            self._history_writer.close()
+            self._history_writer = history_file.HistoryWriter(self.out_dir / "history.csv")
+            for row in self.history:
+                self._history_writer.write(row)
 
     def _write_state(self, stem: str, state: State) -> Path | None:
         if self.out_dir is None:
@@ -778,6 +901,11 @@ class Simulation:
                        "mass_change_work": float(led.mass_change_work),
                        "sleep_dissipation": float(led.sleep_dissipation)},
             "density_scaled": self.inertia is not None,
+            # the scaled masses of the stage in progress: recomputed from a crack set that has
+            # broken since the stage began they would differ, and a resumed stage would not
+            # repeat the uninterrupted one
+            "inertia": None if self.inertia is None else self.inertia.copy(),
+            "scaled_dt": float(self._scaled_dt) if self.inertia is not None else None,
             "kinetic_peak": float(self.kinetic_peak),
             "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
             "provider_terms": [dict(terms), bool(complete)],
@@ -837,8 +965,12 @@ class Simulation:
                            float(g["time"]), int(g["step"]))
         for p, s in zip(self.providers, saved):  # every provider: load_state_dict(d, x), x the restored positions
             p.load_state_dict(s, x=st.x)
-        # the scaled masses follow from the restored crack set; the saved step is the one they give
-        self.set_density_scaling(bool(d.get("density_scaled", False)), book=False)
+        if d.get("inertia") is not None and self.density_scaling and self.user_dt is None and self.exploded:
+            self.inertia = np.array(d["inertia"], dtype=np.float64)
+            self._scaled_dt = float(d["scaled_dt"])
+            self._inertia_kernel = np.ascontiguousarray(np.column_stack([self.inertia, 1.0 / self.inertia]))
+        else:  # older checkpoints: the scaled masses follow from the restored crack set
+            self.set_density_scaling(bool(d.get("density_scaled", False)), book=False)
         self.dt = float(d["dt"])
         if self.sleeping is not None:  # a state saved without sleeping: every region awake
             if d.get("sleeping") is not None:

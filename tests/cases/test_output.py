@@ -158,10 +158,16 @@ def test_keyboard_interrupt_writes_state(tmp_path):
     sim.add_monitor("interrupt", interrupt)
     with pytest.raises(KeyboardInterrupt):
         sim.run(n_steps=100, history_every=5)
-    state = load_state(tmp_path / "interrupted_state.npz")
+    # a full checkpoint (the user guide restarts from it), with a .vtu to look at
+    from fdem.solve.checkpoint import load_checkpoint, read_checkpoint
+
+    state = read_checkpoint(tmp_path / "interrupted_state.npz")["state"]
     assert int(state["step"]) == sim.state.step
     np.testing.assert_array_equal(state["x"], sim.state.x)
     assert (tmp_path / "interrupted_state.vtu").exists()
+    again = Simulation(small_model(), progress=False)
+    load_checkpoint(again, tmp_path / "interrupted_state.npz")
+    np.testing.assert_array_equal(again.state.v, sim.state.v)
 
 
 def test_simulation_writes_compressed_frames_with_only_the_fields_asked_for(tmp_path):
