@@ -17,7 +17,12 @@ Composed of :mod:`fdem.workflow.stages` so that a case script only builds the mo
    time, capped in simulated time. With ``out_dir`` the state it starts from is saved to
    ``runout_start.npz`` (:func:`fdem.solve.checkpoint.load_checkpoint` restarts from it).
 
-Every stage's result (why it ended, when, how many steps) goes into the returned summary.
+Every stage's result (why it ended, when, how many steps) goes into the returned summary, and
+every ending is one of its outcomes: ``stable``, ``failed``, ``time_capped``, ``interrupted``
+(Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
+step: the reason, and the last good state to resume from with a smaller step). With a
+:class:`~fdem.workflow.journal.RunJournal` the run writes resumable checkpoints and a resumed
+run replays the workflow to where it stopped (:mod:`fdem.workflow.journal`).
 """
 from __future__ import annotations
 
@@ -26,7 +31,7 @@ import numbers
 from dataclasses import dataclass, field
 import numpy as np
 from fdem.solve.damping import NO_DAMPING
-from fdem.solve.simulation import Simulation
+from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import check_bracket, factor_of_safety, fundamental_damping
 
@@ -131,11 +136,14 @@ def _check_positive(wf: "SlopeWorkflow", name: str, optional: bool = False) -> N
                          f"got {v!r}")
 
 
-def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None) -> dict:
+def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None,
+                       journal=None) -> dict:
     """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
     values: every stage's result, the factor of safety when searched (``FoSResult.as_dict()``),
     the factor at failure and the state the run ended in (``stable``, ``failed``,
-    ``time_capped`` or ``interrupted``)."""
+    ``time_capped``, ``interrupted`` or ``unstable``, with ``ending`` saying why).
+    ``journal``: a :class:`fdem.workflow.journal.RunJournal` to write resumable checkpoints
+    (and, loaded from one, to continue where it stopped)."""
     wf = workflow or SlopeWorkflow()
     cracks = sim.cracks
     if cracks is None:
@@ -153,21 +161,40 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         return result
 
     try:
-        _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir)
-    except KeyboardInterrupt:
-        # Ctrl-C: the stages so far and the state reached are kept, so the caller can still
-        # write its report and pictures (the solver has written ``interrupted_state.npz``)
+        _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir, journal)
+    except KeyboardInterrupt as stop:
+        # Ctrl-C or a signal, at a whole step: the stages so far and the state reached are
+        # kept, so the caller can still write its report and pictures; the journal has written
+        # its checkpoint (and the solver ``interrupted_state.npz``)
         summary["outcome"] = "interrupted"
+        summary["ending"] = f"interrupted ({stop.args[0] if stop.args else 'Ctrl-C'}) at t = {sim.state.time:.6g} s"
         summary["interrupted_at_s"] = float(sim.state.time)
+        if STOP.forced:  # a second signal: mid-step, so the last periodic or stage checkpoint is the one to resume
+            summary["ending"] += "; stopped mid-step by a second signal: resume from the last checkpoint"
+        if (journal is not None and journal.current is None and not STOP.forced
+                and not journal.writes[-1:] == [("interrupted", sim.state.step)]):
+            journal.write(sim, "interrupted")  # between stages (or in a factor-of-safety trial: its start state)
+    except InstabilityError as err:
+        # the guard stopped an unstable step: the summary says why and where, the journal's
+        # checkpoint (the last stage end or periodic write) is the good state to resume from
+        summary["outcome"] = "unstable"
+        summary["ending"] = str(err)
+        summary["unstable_at_s"] = float(err.time)
+        summary["instability"] = {"kind": getattr(err, "kind", None), "step": int(err.step), "time_s": float(err.time),
+                                  "triangle": int(err.triangle),
+                                  "reason": err.reason, "suggested_dt_s": float(err.suggested_dt),
+                                  "state_file": None if err.state_path is None else str(err.state_path)}
     summary["final_reduction"] = cracks.interfaces.reduction
     summary["n_broken"] = int(cracks.broken.sum())
     return summary
 
 
-def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir) -> None:
-    cracks.hold_elastic(False)
+def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir, journal) -> None:
+    if journal is None or journal.resume is None and not journal.done:
+        cracks.hold_elastic(False)
     eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
-                                     converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail)))
+                                     converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail),
+                          journal=journal))
     summary["equilibrium"] = eq.reason
     if eq.reason != "converged" and sim.time_capped:
         summary["outcome"] = "time_capped"
@@ -178,13 +205,17 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
     else:
         if wf.fos is not None:
             lower, upper, tol = wf.fos
-            fos = factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir)
-            summary["fos"] = fos.as_dict()
+            # its trials restart from this state and leave the simulation in it: a search cut
+            # short is run again whole on resume (from the equilibrium stage's checkpoint)
+            summary["fos"] = (journal.once("fos", lambda: factor_of_safety(
+                sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict()) if journal is not None
+                else factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict())
         if wf.reduction == "steps":
             for F in wf.factors:
                 r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
                                                 damping=damped, fail=fail,
-                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio))))
+                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio)),
+                                     journal=journal))
                 if r.reason != "converged":
                     if sim.time_capped:
                         summary["outcome"] = "time_capped"
@@ -195,7 +226,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             F_end = 1.0 / wf.final_strength
             seconds = (1.0 - wf.final_strength) / wf.reduction_rate
             r = record(run_stage(sim, Stage("reduction_rate", duration=seconds, reduction_ramp=(F_end, seconds),
-                                            damping=NO_DAMPING)))
+                                            damping=NO_DAMPING), journal=journal))
             summary["failed_at_factor"] = F_end
         summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
     if summary["outcome"] == "failed":
@@ -206,8 +237,11 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
 
             from fdem.solve.checkpoint import save_checkpoint
 
-            summary["runout_checkpoint"] = str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
-        record(run_stage(sim, runout_stage(wf, T, height, g)))
+            def save_start():
+                return str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
+
+            summary["runout_checkpoint"] = journal.once("runout_start", save_start) if journal else save_start()
+        record(run_stage(sim, runout_stage(wf, T, height, g), journal=journal))
 
 
 def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:

@@ -219,7 +219,7 @@ def _max_norm(a: np.ndarray, nodes: np.ndarray | None) -> float:
     return float(np.sqrt((a * a).sum(axis=1)).max()) if len(a) else 0.0
 
 
-def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult:
+def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:
     """Run ``stage`` on ``sim`` until its end rule (see the module docstring); returns its result.
 
     ``frames=False`` writes no output frames (the history rows are still written), as for the
@@ -229,19 +229,30 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     ``check_interval`` of simulated time (a history row of the ledger is written at each
     check); the run stops at the first rule that holds. A run that goes unstable raises
     :class:`fdem.solve.simulation.InstabilityError` with its last good state on disk, as every run does.
+
+    ``journal`` (:class:`fdem.workflow.journal.RunJournal`): the stage is one of a resumable
+    workflow. A stage the journal finished before its checkpoint returns its recorded result
+    without stepping; the stage that was in progress continues from its saved runtime, taking
+    the history steps the uninterrupted run took; a running stage writes periodic checkpoints on
+    history rows and one when interrupted, and the journal writes one when it ends.
     """
     from fdem.solve.geostatic import unbalanced_force_ratio
 
+    kind, saved = journal.next_stage(stage.name) if journal is not None else ("fresh", None)
+    if kind == "done":  # finished before the checkpoint: its effects are in the restored state
+        return StageResult(**saved)
     T = response_time(sim.model)
     cracks = sim.cracks
     if stage.reduction is not None or stage.reduction_ramp is not None or stage.hold_elastic is not None:
         if cracks is None:
             raise ValueError(f"stage {stage.name!r} changes strength, but the simulation has no crack elements")
-    if stage.hold_elastic is not None:
+    # a resumed stage's strengths, hold and gravity are in the restored state: setting them again
+    # would re-project damaged elements onto their envelope and the run would not repeat itself
+    if stage.hold_elastic is not None and kind != "resume":
         cracks.hold_elastic(stage.hold_elastic)
-    if stage.reduction is not None:
+    if stage.reduction is not None and kind != "resume":
         cracks.interfaces.set_reduction(stage.reduction)
-    if stage.gravity_factor is not None:
+    if stage.gravity_factor is not None and kind != "resume":
         base = np.asarray(stage.base_gravity if stage.base_gravity is not None else sim.model.gravity, float)
         sim.set_gravity(*(stage.gravity_factor * base))
     nodes = _monitor_nodes(sim, stage.monitor)
@@ -252,7 +263,11 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
     damping = stage.damping
     quasi_static = damping.mass_proportional != 0.0 or damping.local != 0.0
-    scaled = sim.set_density_scaling(quasi_static if stage.density_scaling is None else stage.density_scaling)
+    want_scaled = quasi_static if stage.density_scaling is None else stage.density_scaling
+    if kind == "resume" and want_scaled == sim.density_scaled:
+        scaled = want_scaled  # the restored scaled masses are the stage's own: keep them
+    else:
+        scaled = sim.set_density_scaling(want_scaled)
     stretch = sim.period_stretch  # the stage's time rules in the scaled model's time
     if scaled and damping.mass_proportional != 0.0:
         damping = Damping(mass_proportional=damping.mass_proportional / stretch, local=damping.local)
@@ -270,14 +285,23 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
     output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
     if not frames:
         output_steps = 2 ** 62
-    t0 = sim.state.time
-    step0 = sim.state.step
-    x_start = sim.state.x.copy()
-    ramp = None
-    if stage.reduction_ramp is not None:
-        ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stretch * stage.reduction_ramp[1])
-    status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
-              "since": None}
+    if kind == "resume":
+        t0, step0, n_total = float(saved["t0"]), int(saved["step0"]), int(saved["n_total"])
+        if float(saved.get("dt", dt)) != dt:  # resumed with another step (after an instability): same end time
+            n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
+        x_start = saved["x_start"].copy()
+        ramp = None if saved["ramp"] is None else tuple(saved["ramp"])
+        status = dict(saved["status"])
+    else:
+        t0 = sim.state.time
+        step0 = sim.state.step
+        n_total = sim.steps_to(t0 + length)
+        x_start = sim.state.x.copy()
+        ramp = None
+        if stage.reduction_ramp is not None:
+            ramp = (1.0 / cracks.interfaces.reduction, 1.0 / stage.reduction_ramp[0], stretch * stage.reduction_ramp[1])
+        status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
+                  "since": None}
     conv = stage.converge
 
     def rule(s: Simulation) -> bool:
@@ -319,21 +343,40 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
                     status["reason"] = "converged"
                     status["detail"] = f"after {t:.4g} s"
                     return True
+        if journal is not None:
+            journal.tick(s)
         return False
 
+    def runtime() -> dict:  # what a checkpoint needs to continue this stage (fdem.workflow.journal)
+        return {"name": stage.name, "t0": t0, "step0": step0, "n_total": n_total, "dt": dt, "x_start": x_start,
+                "ramp": None if ramp is None else list(ramp), "status": dict(status),
+                "wall_seconds": wall_before + time.perf_counter() - wall}
+
+    wall_before = float(saved.get("wall_seconds", 0.0)) if kind == "resume" else 0.0
     wall = time.perf_counter()
+    done = sim.state.step - step0
+    if journal is not None:
+        journal.current = runtime
     try:
-        sim.run(t_end=t0 + length, damping=damping, stage=stage.name, history_every=check_steps,
+        sim.run(n_steps=n_total - done, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
                 output_every=output_steps, stop_when=rule, final_output=frames)
+    except KeyboardInterrupt:
+        from fdem.solve.simulation import STOP
+
+        if journal is not None and not STOP.forced:  # stopped at a whole step: the stage continues from here
+            journal.write(sim, "interrupted")
+        raise
     finally:
         sim.dt_fraction = sim_dt_fraction   # the next stage chooses its step afresh
-    wall = time.perf_counter() - wall
+        if journal is not None:
+            journal.current = None
+    wall = wall_before + time.perf_counter() - wall
     reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
     if reason == "capped":
         status["detail"] = f"no rule held within {length:.4g} s ({length / (stretch * T):.3g} response times)"
     ratio = status["ratio"] if math.isfinite(status["ratio"]) else unbalanced_force_ratio(sim)
     row = sim.last_row or {}
-    return StageResult(
+    result = StageResult(
         name=stage.name, reason=reason, t_start=t0, t_end=sim.state.time, steps=sim.state.step - step0,
         wall_seconds=wall, dt=dt, reduction=cracks.interfaces.reduction if cracks is not None else 1.0,
         unbalanced_ratio=float(ratio), kinetic_energy=float(row.get("kinetic", 0.0)),
@@ -341,3 +384,6 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True) -> StageResult
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
         period_stretch=stretch)
+    if journal is not None:
+        journal.stage_finished(sim, result.as_dict())
+    return result

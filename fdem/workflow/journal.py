@@ -1,0 +1,128 @@
+"""A workflow's journal: what makes a run of hours resumable, bit for bit.
+
+A workflow (:func:`fdem.workflow.slope.run_slope_workflow`) is a sequence of stages whose
+path depends only on how earlier stages ended. The journal records that path and, with the
+simulation's own state, writes it into one checkpoint file (``checkpoint.npz``,
+:func:`fdem.solve.checkpoint.save_checkpoint`):
+
+* ``done``: every finished stage's result (:class:`~fdem.workflow.stages.StageResult`), in order;
+* ``marks``: side effects done once, by key, with their JSON value (the runout's start
+  checkpoint, the factor-of-safety search's result);
+* ``stage``: the runtime of the stage in progress when the file was written (its start time and
+  step, the positions it measures displacement from, its end rule's state, its step count),
+  or ``None`` between stages.
+
+It is written when a stage ends, every ``every_seconds`` of wall time inside a stage (on a
+history row), and when the run is interrupted (at a whole step: :class:`fdem.solve.simulation.StopRequest`).
+A resumed run replays the workflow: finished stages return their recorded results without
+stepping, the stage in progress continues from its saved runtime with the same history steps
+(:meth:`fdem.solve.simulation.Simulation.run` ``phase``), and the rest runs as it would have.
+The checkpoint is always a good state: an unstable step never writes one, so after an
+instability it holds the last stage end or periodic write, to resume with a smaller step.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable
+
+__all__ = ["CHECKPOINT_NAME", "RunJournal"]
+
+CHECKPOINT_NAME = "checkpoint.npz"
+"""The journal's checkpoint file in a run's output folder."""
+
+
+class RunJournal:
+    """The journal of one workflow run (module docstring).
+
+    path : the checkpoint file (``None``: nothing written; the journal still replays)
+    every_seconds : wall time [s] between periodic checkpoints inside a stage (``None``: only at
+        stage ends and interruptions)
+    """
+
+    def __init__(self, path=None, every_seconds: float | None = None):
+        if every_seconds is not None and not every_seconds > 0:
+            raise ValueError(f"checkpoint interval must be a positive number of seconds, got {every_seconds!r}")
+        self.path = None if path is None else Path(path)
+        self.every_seconds = every_seconds
+        self.done: list[dict] = []
+        self.marks: dict = {}
+        self.resume: dict | None = None   # runtime of the stage to continue, from the checkpoint
+        self.current: Callable[[], dict] | None = None   # runtime of the stage now running
+        self.writes: list[tuple[str, int]] = []   # (why, simulation step) of every checkpoint written
+        self._calls = 0
+        self._last_write = time.monotonic()
+
+    # ------------------------------------------------------------------ replay
+    def next_stage(self, name: str) -> tuple[str, dict | None]:
+        """What to do with the workflow's next stage ``name``: ``("done", result)`` when it
+        finished before the checkpoint, ``("resume", runtime)`` when it was in progress,
+        ``("fresh", None)`` otherwise. A replay that asks for another stage than the one
+        recorded (the options changed the workflow's path) is refused."""
+        i = self._calls
+        self._calls += 1
+        if i < len(self.done):
+            recorded = self.done[i]["name"]
+            if recorded != name:
+                raise ValueError(f"resume: stage {i + 1} of the checkpoint is {recorded!r}, but this run's workflow "
+                                 f"asks for {name!r}; resume with the options the run started with")
+            return "done", self.done[i]
+        if self.resume is not None:
+            runtime, self.resume = self.resume, None
+            if runtime["name"] != name:
+                raise ValueError(f"resume: the checkpoint was written in stage {runtime['name']!r}, but this run's "
+                                 f"workflow asks for {name!r} next; resume with the options the run started with")
+            return "resume", runtime
+        return "fresh", None
+
+    def once(self, key: str, action: Callable[[], object]):
+        """``action()`` the first time ``key`` is asked for, its recorded value on a replay."""
+        if key not in self.marks:
+            self.marks[key] = action()
+        return self.marks[key]
+
+    # ------------------------------------------------------------------ writing
+    def stage_finished(self, sim, result: dict) -> None:
+        """Record a finished stage and write the checkpoint (a stage end is a good state)."""
+        self.done.append(dict(result))
+        self.current = None
+        self.write(sim, "stage end")
+
+    def tick(self, sim) -> None:
+        """Write a periodic checkpoint if ``every_seconds`` of wall time have passed."""
+        if self.every_seconds is not None and time.monotonic() - self._last_write >= self.every_seconds:
+            self.write(sim, "periodic")
+
+    def write(self, sim, why: str) -> Path | None:
+        """Write the checkpoint now (``why`` goes into :attr:`writes`)."""
+        self._last_write = time.monotonic()
+        if self.path is None:
+            return None
+        from fdem.solve.checkpoint import save_checkpoint
+
+        context = {"journal": 1, "done": self.done, "marks": self.marks,
+                   "stage": None if self.current is None else self.current(), "why": why}
+        save_checkpoint(sim, self.path, context=context)
+        self.writes.append((why, int(sim.state.step)))
+        return self.path
+
+    # ------------------------------------------------------------------ reading
+    @classmethod
+    def resume_from(cls, sim, path, every_seconds: float | None = None, write_to=None) -> "RunJournal":
+        """Load the checkpoint ``path`` into ``sim`` (:func:`fdem.solve.checkpoint.load_checkpoint`)
+        and return its journal, ready to replay; later checkpoints go to ``write_to`` (default
+        ``path``). A checkpoint written without a journal (``interrupted_state.npz`` of a bare
+        simulation, a stage's own file) restarts the workflow from its first stage on that state:
+        refused here, as it would not repeat the run."""
+        from fdem.solve.checkpoint import load_checkpoint
+
+        context = load_checkpoint(sim, path)
+        if not isinstance(context, dict) or context.get("journal") != 1:
+            raise ValueError(f"{path} holds a simulation state but no workflow journal, so the run cannot be "
+                             "continued where it stopped; load it with fdem.solve.checkpoint.load_checkpoint "
+                             "to look at it or to start a new workflow from it")
+        journal = cls(write_to or path, every_seconds)
+        journal.done = [dict(r) for r in context["done"]]
+        journal.marks = dict(context["marks"])
+        journal.resume = context["stage"]
+        return journal
