@@ -41,8 +41,34 @@ def _run_case(name: str, argv: list[str]) -> int:
     except KeyError as err:
         print(f"fdem run: {err.args[0]}", file=sys.stderr)
         return 2
-    module.main(argv)
-    return 0
+    return _ending(name, module.main, argv)
+
+
+def _ending(name: str, main, argv: list[str]) -> int:
+    """Run a case's ``main`` and turn how it ended into one message and an exit code
+    (:func:`fdem.cases.common.exit_code`): a finished run by its summary's outcome; an
+    interruption outside the time loop 130 / 143; a file that could not be written (a full
+    disk, a folder made read-only) or an unstable run that the case did not catch, one line
+    and 1, never a chain of tracebacks. Anything else is a defect and keeps its traceback."""
+    import signal
+
+    from fdem.cases.common import exit_code
+    from fdem.solve.simulation import STOP, InstabilityError
+
+    try:
+        return exit_code(main(argv))
+    except KeyboardInterrupt as stop:
+        sig = STOP.received or "SIGINT"
+        print(f"fdem run {name}: interrupted ({stop.args[0] if stop.args else sig}) before the run could "
+              "write its summary", file=sys.stderr)
+        return 128 + int(getattr(signal, sig, signal.SIGINT))
+    except InstabilityError as err:
+        print(f"fdem run {name}: the run went unstable: {err}", file=sys.stderr)
+        return 1
+    except OSError as err:
+        what = f"{err.strerror} ({err.filename})" if err.strerror and err.filename else str(err)
+        print(f"fdem run {name}: could not write: {what}; the files written before this one are kept", file=sys.stderr)
+        return 1
 
 
 def _run(args) -> int:

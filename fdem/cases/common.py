@@ -13,6 +13,25 @@ to ``<out>/summary.json``) and accepts at least:
 ``--density-scaling B``  added-mass budget of the density-scaled quasi-static stages, a fraction
                      of the model's mass (default 0.01; 0 runs every stage on the real masses;
                      :mod:`fdem.solve.density_scaling`)
+``--overwrite``      replace the run already in ``--out`` (without it such a folder is refused)
+
+The slope cases (their workflow is resumable, :mod:`fdem.workflow.journal`) also take
+
+``--resume DIR``     continue the run in ``DIR`` from its ``checkpoint.npz``, with the options it
+                     started with (``run.json``); only ``--threads``, ``--quiet``,
+                     ``--no-pictures``, ``--checkpoint-every``, ``--yes`` and the time-step
+                     factors ``--dt-fraction`` / ``--runout-dt-fraction`` (after an unstable
+                     run: a smaller step) may be given again
+``--dt-fraction F``   time-step factor of the quasi-static stages, a fraction of the critical step
+                     (default 0.8)
+``--checkpoint-every S``  wall-clock seconds between periodic checkpoints inside a stage
+                     (default 600; a checkpoint is also written at every stage end and on every
+                     interruption)
+
+Every run writes ``run.json`` (the case, its options, when it started and how it ended) before
+any meshing, after checking that ``--out`` can be written. The command's exit code says how the
+run ended (:func:`exit_code`): 0 finished (whatever the slope did), 1 error or unstable run,
+2 bad options, 130 / 143 interrupted by SIGINT / SIGTERM (resumable).
 """
 from __future__ import annotations
 
@@ -23,7 +42,23 @@ import sys
 from pathlib import Path
 
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
-           "stop_cleanly_on_signals", "use_density_scaling"]
+           "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
+           "prepare_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
+           "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS"]
+
+CONFIRM_ABOVE_HOURS = 12.0
+"""A run whose estimated wall time is above this asks for ``--yes`` (refused without it when no
+one is at a terminal to answer)."""
+
+RUN_FILE = "run.json"
+"""The file in a run's output folder that says which case ran it, with which options, and how it ended."""
+
+OUTPUT_SUFFIXES = (".vtu", ".pvd", ".png", ".npz", ".csv", ".json", ".msh", ".gif", ".tmp")
+"""What ``--overwrite`` removes from the top of an output folder that holds an earlier run."""
+
+RESUME_OPTIONS = ("--threads", "--quiet", "--no-pictures", "--checkpoint-every", "--yes", "--dt-fraction",
+                  "--runout-dt-fraction")
+"""The options that ``--resume`` accepts beside it (the others come from the run's ``run.json``)."""
 
 SMALL_MESH_TRIANGLES = 20_000
 """Below this many triangles a case runs on one Numba thread unless ``--threads`` (or
@@ -50,7 +85,23 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
     parser.add_argument("--density-scaling", type=float, default=0.01, metavar="BUDGET",
                         help="added-mass budget of the density-scaled quasi-static stages, a fraction of the "
                              "model's mass (default 0.01; 0: real masses in every stage)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the earlier run in --out (its frames, pictures, checkpoints and summary)")
     return parser
+
+
+def add_resume_options(parser: argparse.ArgumentParser) -> None:
+    """``--resume``, ``--checkpoint-every`` and ``--yes``: the options of a resumable case."""
+    parser.add_argument("--resume", type=Path, default=None, metavar="DIR",
+                        help="continue the run in DIR from its checkpoint.npz with the options it started with "
+                             f"(only {', '.join(RESUME_OPTIONS)} may be given again)")
+    parser.add_argument("--checkpoint-every", type=float, default=600.0, metavar="SECONDS",
+                        help="wall-clock seconds between periodic checkpoints inside a stage (default 600; "
+                             "checkpoints are also written at every stage end and interruption)")
+    parser.add_argument("--dt-fraction", type=float, default=0.8, metavar="FACTOR",
+                        help="time-step factor of the quasi-static stages, a fraction of the critical step "
+                             "(default 0.8; resume an unstable run with a smaller one)")
+    parser.add_argument("--yes", action="store_true", help="run even when the cost estimate is above the threshold")
 
 
 def check_common(parser: argparse.ArgumentParser, args) -> None:
@@ -66,6 +117,225 @@ def check_common(parser: argparse.ArgumentParser, args) -> None:
     budget = getattr(args, "density_scaling", 0.0)
     if not (math.isfinite(budget) and 0.0 <= budget <= 1.0):
         parser.error(f"--density-scaling must be a fraction of the model's mass in [0, 1], got {budget}")
+    fraction = getattr(args, "dt_fraction", 0.8)
+    if not (math.isfinite(fraction) and 0.0 < fraction <= 1.0):
+        parser.error(f"--dt-fraction (time-step factor) must lie in (0, 1], got {fraction}")
+    every = getattr(args, "checkpoint_every", None)
+    if every is not None and not (math.isfinite(every) and every >= 0):
+        parser.error(f"--checkpoint-every must be a number of seconds >= 0 (0: only at stage ends), got {every}")
+
+
+# ----------------------------------------------------------------------------- run folder
+def _option_names(argv) -> list[str]:
+    return [a.split("=", 1)[0] for a in argv if a.startswith("--")]
+
+
+def _read_run_file(folder: Path) -> dict:
+    import json
+
+    try:
+        return json.loads((folder / RUN_FILE).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
+    """Check the output folder before any work and write ``run.json``; returns ``args``.
+
+    With ``--resume DIR`` the options come from ``DIR/run.json`` (the run must be this case's,
+    not finished, with its ``checkpoint.npz``), plus the few a resume may change
+    (:data:`RESUME_OPTIONS`). Otherwise ``--out`` must be a folder that can be created and
+    written, and must not hold another run unless ``--overwrite`` (which removes that run's
+    outputs first, so that old frames never mix with new ones). Every refusal is a
+    ``parser.error`` (exit code 2) naming the folder and what to do."""
+    import sys as _sys
+
+    argv = list(_sys.argv[1:] if argv is None else argv)
+    check_common(parser, args)  # the options first: a bad one is named before the folder is looked at
+    resume = getattr(args, "resume", None)
+    if resume is not None:
+        folder = Path(resume)
+        record = _read_run_file(folder)
+        if not record:
+            parser.error(f"--resume {folder}: no readable {RUN_FILE} there; is it the --out folder of a run?")
+        if record.get("case") != name:
+            parser.error(f"--resume {folder}: that folder holds a run of {record.get('case')!r}, not {name!r}")
+        if not any(folder.glob("checkpoint.npz")) and not any(folder.glob("*/checkpoint.npz")):
+            parser.error(f"--resume {folder}: no checkpoint.npz there (the run wrote none before it stopped)")
+        if record.get("outcome") not in (None, "interrupted", "unstable", "running", "error"):
+            parser.error(f"--resume {folder}: that run has finished (outcome {record['outcome']!r}); nothing to resume")
+        others = [o for o in _option_names(argv) if o not in RESUME_OPTIONS + ("--resume",)]
+        if others:
+            parser.error(f"--resume takes the run's own options from {folder / RUN_FILE}; only "
+                         f"{', '.join(RESUME_OPTIONS)} may be given again, not {', '.join(others)}")
+        again = [a for i, a in enumerate(argv) if not (a == "--resume" or a.startswith("--resume=")
+                                                      or (i and argv[i - 1] == "--resume"))]
+        args = parser.parse_args(list(record.get("argv", [])) + again)
+        args.resume, args.out, args.overwrite = folder, folder, False
+        check_common(parser, args)
+        record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
+                      resumed_with=again, resumed_at=_now())
+        _write_run_file(parser, folder, record)
+        return args
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        parser.error(f"--out {out} is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".fdem_write_probe"
+        probe.write_bytes(b"0")
+        probe.unlink()
+    except OSError as err:
+        parser.error(f"--out {out} cannot be written: {err.strerror or err}")
+    earlier = _read_run_file(out)
+    held = earlier or (out / "summary.json").exists() or any(out.glob("*.pvd"))
+    if held and not args.overwrite:
+        what = (f"a run of {earlier.get('case')!r} started {earlier.get('started')} (outcome {earlier.get('outcome')})"
+                if earlier else "the outputs of an earlier run")
+        parser.error(f"--out {out} holds {what}; give --overwrite to replace it"
+                     + (f", --resume {out} to continue it" if earlier.get("outcome") in ("interrupted", "unstable",
+                                                                                            "running") else "")
+                     + ", or another --out")
+    if held:
+        for f in out.iterdir():
+            if f.is_file() and (f.suffix in OUTPUT_SUFFIXES or f.name.endswith(".tmp.npz")):
+                f.unlink()
+    _write_run_file(parser, out, {"case": name, "argv": [a for a in argv if a != "--overwrite"],
+                                  "started": _now(), "outcome": "running", "fdem_version": _version(),
+                                  "pid": os.getpid()})
+    return args
+
+
+def _now() -> str:
+    import time as _time
+
+    return _time.strftime("%Y-%m-%dT%H:%M:%S%z")
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("fdem")
+    except Exception:  # not installed (run from a source tree)
+        return "unknown"
+
+
+def _write_run_file(parser, folder: Path, record: dict) -> None:
+    from fdem.io.jsonable import write_json
+
+    try:
+        write_json(folder / RUN_FILE, record)
+    except OSError as err:
+        parser.error(f"cannot write {folder / RUN_FILE}: {err.strerror or err}")
+
+
+def check_mesh_size(parser: argparse.ArgumentParser, geometry, size: float) -> int:
+    """Refuse, before meshing, an element size whose mesh would not fit in the free memory
+    (:func:`fdem.solve.cost.check_mesh_budget`); returns the estimated triangle count."""
+    from fdem.geometry.polygons import signed_area
+    from fdem.solve.cost import check_mesh_budget, estimate_triangles
+
+    area = sum(abs(signed_area(b.vertices)) for b in geometry.bodies)
+    n = estimate_triangles(area, size)
+    try:
+        check_mesh_budget(n)
+    except ValueError as err:
+        parser.error(f"--size {size}: {err}")
+    return n
+
+
+def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> dict:
+    """:func:`report_cost` for the slope workflow's runout stage at its cap and its own step
+    (the longest stage by far: the quasi-static stages run density-scaled at a larger step)."""
+    import numpy as np
+
+    from fdem.workflow.slope import runout_stage
+    from fdem.workflow.stages import response_time
+
+    height = float(np.ptp(sim.model.topology.x0[:, 1]))
+    g = float(np.linalg.norm(sim.gravity)) or 9.81
+    cap = runout_stage(workflow, response_time(sim.model), height, g).max_time
+    return report_cost(parser, sim, args, cap, f"the runout stage, up to {cap:.3g} s simulated",
+                       dt_fraction=workflow.runout_dt_fraction)
+
+
+def report_cost(parser: argparse.ArgumentParser, sim, args, simulated_seconds: float, what: str,
+                dt_fraction: float | None = None) -> dict:
+    """Print (and return, for the summary) the cost estimate of ``sim`` before any stepping:
+    the step and what sets it, steps and wall time for ``simulated_seconds`` of ``what``, the
+    memory (:func:`fdem.solve.cost.estimate_cost`), and a warning when a penalty cuts the step
+    far below the triangles'. Above :data:`CONFIRM_ABOVE_HOURS` of wall time the run needs
+    ``--yes`` (or a "y" at the terminal), so that an option mistaken by 10x is found now."""
+    from fdem.solve.cost import dt_warning, estimate_cost
+
+    step = sim.dt
+    if dt_fraction is not None:  # the stage's own step
+        sim.dt = dt_fraction * sim.critical_dt()[0]
+    try:
+        estimate = estimate_cost(sim, simulated_seconds=simulated_seconds)
+    finally:
+        sim.dt = step
+    print(f"cost estimate ({what}):\n  " + estimate.describe().replace("\n", "\n  "))
+    warning = dt_warning(estimate)
+    if warning:
+        print(f"warning: {warning}")
+    hours = (estimate.wall_seconds or 0.0) / 3600.0
+    if hours > CONFIRM_ABOVE_HOURS and not getattr(args, "yes", False) and getattr(args, "resume", None) is None:
+        question = (f"the estimate is {hours:.1f} h of wall time (above {CONFIRM_ABOVE_HOURS:g} h)")
+        if sys.stdin.isatty():
+            if input(f"{question}; run it? [y/N] ").strip().lower() not in ("y", "yes"):
+                parser.error(f"{question}; not started")
+        else:
+            parser.error(f"{question}; give --yes to run it anyway")
+    return {**estimate.as_dict(), "for": what, "warning": warning}
+
+
+def start_journal(sim, args, folder=None):
+    """The run's :class:`fdem.workflow.journal.RunJournal` in ``folder`` (default ``--out``):
+    loaded from ``--resume``'s checkpoint into ``sim`` (its frames and history continued) when
+    the folder has one, else a new one writing ``checkpoint.npz`` there every
+    ``--checkpoint-every`` seconds. Sets the simulation's ``--dt-fraction``."""
+    from fdem.workflow.journal import CHECKPOINT_NAME, RunJournal
+
+    every = getattr(args, "checkpoint_every", None) or None
+    path = Path(folder if folder is not None else args.out) / CHECKPOINT_NAME
+    sim.dt_fraction = getattr(args, "dt_fraction", sim.dt_fraction)
+    if getattr(args, "resume", None) is not None and path.is_file():
+        journal = RunJournal.resume_from(sim, path, every)
+        sim.continue_outputs()
+        print(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
+              f"{len(journal.done)} stage(s) done" + (f", {journal.resume['name']} in progress" if journal.resume else ""))
+        return journal
+    return RunJournal(path, every)
+
+
+def exit_code(summary) -> int:
+    """The command's exit code for a case's summary: 130 / 143 interrupted by SIGINT / SIGTERM,
+    1 unstable (or any outcome ``error``), 0 otherwise (the run finished, whatever the slope did)."""
+    outcome = summary.get("outcome") if isinstance(summary, dict) else None
+    if outcome == "interrupted":
+        import signal
+
+        from fdem.solve.simulation import STOP
+
+        name = STOP.received or "SIGINT"
+        return 128 + int(getattr(signal, name, signal.SIGINT))
+    return 1 if outcome in ("unstable", "error", "write_error") else 0
+
+
+def finish_run(out, summary: dict) -> None:
+    """Say in ``run.json`` how the run ended (outcome, ending, exit code, when)."""
+    from fdem.io.jsonable import write_json
+
+    folder = Path(out)
+    record = _read_run_file(folder)
+    record.update(outcome=summary.get("outcome", "finished"), ending=summary.get("ending"),
+                  exit_code=exit_code(summary), ended=_now())
+    try:
+        write_json(folder / RUN_FILE, record)
+    except OSError as err:
+        print(f"could not update {folder / RUN_FILE}: {err.strerror or err}", file=sys.stderr)
 
 
 def set_threads(n: int | None) -> None:
@@ -94,18 +364,24 @@ def threads_for_mesh(requested: int | None, n_triangles: int) -> int:
 
 
 def stop_cleanly_on_signals() -> None:
-    """Make ``kill -TERM`` and ``kill -INT`` end a case as Ctrl-C does (the workflow keeps its
-    stages, the case writes its summary, the solver ``interrupted_state.npz``). Needed because
-    a run started in the background by a non-interactive shell ignores SIGINT, and SIGTERM
-    would otherwise kill it without a word. Only in the main thread (signals go there)."""
+    """Make ``kill -TERM`` and ``kill -INT`` (Ctrl-C) end a case cleanly: a running time loop
+    stops at the next whole step (:class:`fdem.solve.simulation.StopRequest`), the workflow
+    writes its checkpoint and keeps its stages, the case writes its summary and pictures, and
+    the command exits 130 / 143. A second signal stops at once. Needed because a run started
+    in the background by a non-interactive shell ignores SIGINT, and SIGTERM would otherwise
+    kill it without a word. Only in the main thread (signals go there)."""
     import signal
     import threading
+
+    from fdem.solve.simulation import STOP
 
     if threading.current_thread() is not threading.main_thread():
         return
 
     def interrupt(signum, frame):
-        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+        name = signal.Signals(signum).name
+        if not STOP.ask(name):  # no time loop to stop at a step boundary, or asked twice
+            raise KeyboardInterrupt(f"signal {name}")
 
     signal.signal(signal.SIGTERM, interrupt)
     signal.signal(signal.SIGINT, interrupt)

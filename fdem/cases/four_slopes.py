@@ -31,7 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
+                               finish_run, prepare_run, report_runout_cost,
+                               set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
+                               use_density_scaling)
 
 import math
 from fdem.mesh.topology import INTACT
@@ -198,15 +201,31 @@ def main(argv=None) -> dict:
     parser.add_argument("--runout-dt-fraction", type=float, default=0.4, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.4; 0.8 is twice as fast and "
                              "lengthens the demo's runout by about 8 %%, docs/pareto.md)")
-    parser.add_argument("--max-steps", type=int, default=None, help="0: mesh and pictures only")
+    parser.add_argument("--max-steps", type=int, default=None, choices=[0],
+                        help="0: mesh and pictures only (stages end by physics, not by step counts: "
+                             "--max-time caps the simulated time)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--rigid-blocks", action="store_true",
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
-    args = parser.parse_args(argv)
+    add_resume_options(parser)
+    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
     check_common(parser, args)
     if not 0.0 < args.runout_dt_fraction <= 1.0:
         parser.error(f"--runout-dt-fraction must lie in (0, 1], got {args.runout_dt_fraction}")
+    if args.runout_time is not None and not (math.isfinite(args.runout_time) and args.runout_time > 0):
+        parser.error(f"--runout-time must be a positive number of simulated seconds, got {args.runout_time}")
+    if args.refine is not None and not (math.isfinite(args.refine) and 0 < args.refine <= 1):
+        parser.error(f"--refine (element size factor on joints) must lie in (0, 1], got {args.refine}")
+    if args.joint_offset is not None and not (math.isfinite(args.joint_offset) and 0 <= args.joint_offset < 1):
+        parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
+    from fdem.workflow.slope import SlopeWorkflow
+
+    try:  # the workflow's settings are checked now, not after hours of stages
+        workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
+                                 runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction)
+    except ValueError as err:
+        parser.error(str(err))
     set_threads(args.threads)
     try:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
@@ -218,8 +237,12 @@ def main(argv=None) -> dict:
     from fdem.mesh.quality import quality_report
     from fdem.mesh.preview import plot_mesh_png, write_mesh_vtu
     from fdem.results.report import RunReport
-    from fdem.workflow.slope import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
+    from fdem.workflow.slope import factor_of_safety_figures, run_slope_workflow
 
+    try:
+        check_mesh_size(parser, four_slope_geometry(args.angle, spacing, joint_offset=args.joint_offset), args.size)
+    except ValueError as err:  # a bad geometry option: say what is wrong, no traceback
+        parser.error(str(err))
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -239,7 +262,6 @@ def main(argv=None) -> dict:
           f"({int((topo.crack_tag > 0).sum())} on joints); {threads} thread(s)")
     print(report)
     out = args.out
-    out.mkdir(parents=True, exist_ok=True)
     name = f"{args.angle}_{args.spacing}"
     mesh.save(out / f"{name}.msh")
     vtu = write_mesh_vtu(topo, out / f"{name}_mesh.vtu")
@@ -262,15 +284,17 @@ def main(argv=None) -> dict:
         use_density_scaling(sim, args.density_scaling)
         print(f"time step {sim.dt:.3g} s (critical limits: "
               + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
+        summary["cost_estimate"] = report_runout_cost(parser, sim, args, workflow)
         t1 = time.perf_counter()
-        workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
-                                 runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction)
+        journal = start_journal(sim, args)
         try:
-            result = run_slope_workflow(sim, workflow, out_dir=out)
-            save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
+            result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
+            if result["outcome"] != "unstable":  # an unstable state is no state to restart from
+                save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
         finally:
             sim.close()
-        summary.update({"workflow": result, "outcome": result["outcome"],
+        summary.update({"workflow": result, "outcome": result["outcome"], "ending": result.get("ending"),
+                        "checkpoints": journal.writes,
                         "failed_at_factor": result["failed_at_factor"],
                         **factor_of_safety_figures(result),
                         "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
@@ -287,5 +311,6 @@ def main(argv=None) -> dict:
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")
     write_json(out / "summary.json", summary)
+    finish_run(out, summary)
     print(f"wrote {out / 'summary.json'}")
     return summary

@@ -40,17 +40,20 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, finish_run,
+                               prepare_run, set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh,
+                               time_capped, use_density_scaling)
 
 from fdem.geometry.joint_sets import SegmentSet
 from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import simple_slope
 from fdem.io.jsonable import write_json
 
-__all__ = ["MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "toughness_G_I", "property_sets", "build",
+__all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "toughness_G_I", "property_sets", "build",
            "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS", "JOINT_COHESION", "JOINT_FRICTION"]
 
 
+NAME = "muliashi"
 MULIASHI_SPACING_RULES = ("pitch", "gap")
 
 
@@ -179,6 +182,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     from fdem.results.report import RunReport
     from fdem.workflow.stages import Convergence, Stage, response_time, run_stage
     from fdem.workflow.fos import GravityIncrease, factor_of_safety
+    from fdem.solve.simulation import InstabilityError
 
     t0 = time.perf_counter()
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
@@ -195,29 +199,44 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 
     report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
     T = response_time(sim.model)
+    journal = start_journal(sim, args, out)
     if args.gravity_factor is None:
-        fos = factor_of_safety(sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(),
-                               out_dir=out, workers=args.workers, build=build_simulation,
-                               build_args=(args.size, spacing_rule, not args.below_toe))
-        k_fail = fos.bracket[1] * (1.0 + args.overload)
-        fos_summary = fos.as_dict()
-        print(f"[{spacing_rule}] critical gravity factor {fos.fos:.3f} (bracket {fos.bracket[0]:.3f}-"
-              f"{fos.bracket[1]:.3f}, {len(fos.trials)} trials, {fos.wall_seconds:.0f} s); loading at k = {k_fail:.3f}")
+        fos_summary = journal.once("fos", lambda: factor_of_safety(
+            sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
+            workers=args.workers, build=build_simulation,
+            build_args=(args.size, spacing_rule, not args.below_toe)).as_dict())
+        k_fail = fos_summary["bracket"][1] * (1.0 + args.overload)
+        print(f"[{spacing_rule}] critical gravity factor {fos_summary['fos']:.3f} (bracket "
+              f"{fos_summary['bracket'][0]:.3f}-{fos_summary['bracket'][1]:.3f}, {fos_summary['n_trials']} trials, "
+              f"{fos_summary['wall_seconds']:.0f} s); loading at k = {k_fail:.3f}")
     else:
         k_fail, fos_summary = args.gravity_factor, None
     # The collapse under many times gravity is violent: half the automatic step keeps contact
     # impacts accurate (docs/pareto.md: impact energy 1.5 % at dt_fraction 0.8, 0.25 % at 0.4); at
     # 0.8 the first run inverted a crest triangle at t = 1.09 s.
-    sim.dt_fraction = 0.4
-    failure = run_stage(sim, Stage("gravity_increase", gravity_factor=k_fail, max_time=args.runout_time or 20 * T,
-                                   converge=Convergence(unbalanced_ratio=None, kinetic_ratio=0.01, min_time=2 * T,
-                                                        hold_for=T)))
-    sim.close()
+    failure_stage = Stage("gravity_increase", gravity_factor=k_fail, max_time=args.runout_time or 20 * T,
+                          converge=Convergence(unbalanced_ratio=None, kinetic_ratio=0.01, min_time=2 * T, hold_for=T),
+                          dt_fraction=0.4)
+    outcome, ending = "finished", None
+    try:
+        failure = run_stage(sim, failure_stage, journal=journal)
+    except KeyboardInterrupt as stop:  # at a whole step: the journal has written its checkpoint
+        outcome, ending = "interrupted", f"interrupted ({stop.args[0] if stop.args else 'Ctrl-C'})"
+    except InstabilityError as err:  # the journal's checkpoint is the last good state
+        outcome, ending = "unstable", str(err)
+    finally:
+        sim.close()
+    if outcome != "finished":
+        summary = report.write(out, pictures_on=not args.no_pictures, extra={
+            "case": f"muliashi_{spacing_rule}", "outcome": outcome, "ending": ending, "size_m": args.size,
+            "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail})
+        print(f"[{spacing_rule}] {ending}; resume with: fdem run muliashi --resume {args.out}")
+        return summary
     summary = report.write(out, pictures_on=not args.no_pictures, extra={
         "case": f"muliashi_{spacing_rule}", "spacing_rule": spacing_rule, "joints_above_toe_only": not args.below_toe,
         "size_m": args.size, "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail,
         "failure_stage": failure.as_dict(), "response_time_s": T, "wall_seconds": time.perf_counter() - t0,
-        "time_capped": time_capped(sim),
+        "time_capped": time_capped(sim), "outcome": "finished", "checkpoints": journal.writes,
         "paper": {"density_factor_reached": 10.0, "events": 238, "magnitude_mean": -3.07, "magnitude_std": 0.495,
                   "magnitude_min": -4.91, "magnitude_max": -2.05}})
     print(f"[{spacing_rule}] {failure.reason} after {failure.t_end - failure.t_start:.3g} s: "
@@ -227,7 +246,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    parser = case_parser(__doc__, "runs/muliashi", 0.6, "element size [m] (default 0.6)")
+    parser = case_parser(__doc__, "runs/muliashi", 0.6, "element size [m] (default 0.6)", name=NAME)
     parser.add_argument("--spacing-rule", choices=["pitch", "gap", "both"], default="both",
                         help="read the 3 m joint spacing as start-to-start pitch or as the gap (default both)")
     parser.add_argument("--below-toe", action="store_true", help="also build the joints below the toe's elevation")
@@ -239,8 +258,17 @@ def main(argv=None) -> dict:
     parser.add_argument("--workers", type=int, default=1, help="factor-of-safety trials in parallel")
     parser.add_argument("--gravity-factor", type=float, default=None,
                         help="skip the search and load at this gravity factor")
-    args = parser.parse_args(argv)
+    add_resume_options(parser)
+    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
     check_common(parser, args)
+    for name, value, low in (("--upper", args.upper, 1.0), ("--tol", args.tol, 0.0),
+                             ("--runout-time", args.runout_time, 0.0), ("--gravity-factor", args.gravity_factor, 0.0)):
+        if value is not None and not (math.isfinite(value) and value > low):
+            parser.error(f"{name} must be a finite number above {low:g}, got {value}")
+    if not (math.isfinite(args.overload) and args.overload >= 0):
+        parser.error(f"--overload must be a fraction >= 0, got {args.overload}")
+    if args.workers < 1:
+        parser.error(f"--workers must be at least 1, got {args.workers}")
     set_threads(args.threads)
     rules = ["pitch", "gap"] if args.spacing_rule == "both" else [args.spacing_rule]
     results = {}
@@ -248,10 +276,14 @@ def main(argv=None) -> dict:
         out = args.out / rule if len(rules) > 1 else args.out
         out.mkdir(parents=True, exist_ok=True)
         results[rule] = run_one(args, rule, out)
+        if results[rule].get("outcome") in ("interrupted", "unstable"):
+            break
     summary = results[rules[0]] if len(rules) == 1 else {"cases": results}
-    args.out.mkdir(parents=True, exist_ok=True)
     if len(rules) > 1:
+        ended = [r.get("outcome") for r in results.values()]
+        summary["outcome"] = next((o for o in ended if o in ("interrupted", "unstable")), "finished")
         write_json(args.out / "summary.json", summary)
+    finish_run(args.out, summary)
     return summary
 
 

@@ -37,7 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (cap_simulated_time, use_density_scaling, case_parser, check_common, set_threads, stop_cleanly_on_signals, threads_for_mesh, time_capped)
+from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
+                               finish_run, prepare_run, report_runout_cost,
+                               set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
+                               use_density_scaling)
 
 __all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
            "FOS_BRACKET", "geometry", "property_sets", "build", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
@@ -123,7 +126,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--rigid-blocks", action="store_true",
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
-    args = parser.parse_args(argv)
+    add_resume_options(parser)
+    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
     check_common(parser, args)
     set_threads(args.threads)
     if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
@@ -132,11 +136,13 @@ def main(argv=None) -> dict:
 
     from fdem.geometry.polygons import slope_toe
     from fdem.results.report import RunReport
+    from fdem.solve.checkpoint import save_checkpoint
     from fdem.workflow.slope import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     wall = time.perf_counter()
     out = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    check_mesh_size(parser, geometry(), args.size)
+    workflow = SlopeWorkflow(fos=FOS_BRACKET if args.fos else None)
     geo, sim, cracks, start = build(args.size, out, progress=not args.quiet)
     stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     toe_x, toe_y = slope_toe(geo.bodies[0])
@@ -146,17 +152,23 @@ def main(argv=None) -> dict:
     threads = threads_for_mesh(args.threads, sim.model.topology.n_triangles)
     print(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
           f"time step {sim.dt:.3g} s, {threads} thread(s)")
+    cost = report_runout_cost(parser, sim, args, workflow)
+    journal = start_journal(sim, args)
     try:
-        result = run_slope_workflow(sim, SlopeWorkflow(fos=FOS_BRACKET if args.fos else None), out_dir=out)
+        result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
+        if result["outcome"] != "unstable":  # the end state, to restart from or look at
+            save_checkpoint(sim, out / "final_state.npz")
     finally:
         sim.close()
     extra = {"case": NAME, "size_m": args.size, "threads": threads, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
              "geostatic_seconds": start.seconds, "workflow": result,
              "failed_at_factor": result["failed_at_factor"], "outcome": result["outcome"],
+             "ending": result.get("ending"), "checkpoints": journal.writes, "cost_estimate": cost,
              **factor_of_safety_figures(result), "wall_seconds": time.perf_counter() - wall}
     summary = report.write(out, extra=extra, pictures_on=not args.no_pictures)
     summary["wall_seconds"] = time.perf_counter() - wall
     write_json(out / "summary.json", summary)
+    finish_run(out, summary)
     run = summary["runout"]
     print(f"outcome {summary['outcome']}"
           + (f", factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "

@@ -1,0 +1,194 @@
+"""Runs that lose nothing: a run stopped by SIGTERM or killed outright, resumed with
+``--resume``, ends bit for bit where the uninterrupted run ends; an unstable run resumes from
+its last good checkpoint with a smaller step; every ending has its exit code and ``run.json``.
+
+The scene is the quick-start slope at 2 m elements (342 triangles): its whole workflow
+(equilibrium, three reduction steps, failure at F = 1.43, runout to rest over 106,295 steps)
+takes about 10 s on one thread, so a signal sent a few seconds in lands in a real stage.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdem.solve.checkpoint import read_checkpoint
+
+SCENE = ["--size", "2.0", "--no-pictures", "--quiet", "--threads", "1"]
+
+
+def fdem(*args, timeout=300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fdem.cli", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def start(out: Path, *extra) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "fdem.cli", "run", "quick-start", *SCENE, "--out", str(out), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def wait_for_rows(out: Path, proc: subprocess.Popen, rows: int, timeout: float = 240.0) -> None:
+    """Wait until the run has written ``rows`` history rows (it is then well inside its stages)."""
+    t0 = time.monotonic()
+    history = out / "history.csv"
+    while time.monotonic() - t0 < timeout:
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before it could be stopped:\n{proc.stdout.read()}")
+        if history.exists() and sum(1 for _ in history.open()) > rows:
+            return
+        time.sleep(0.05)
+    pytest.fail("the run wrote no history")
+
+
+def state(path: Path) -> dict:
+    return read_checkpoint(path)["state"]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("whole") / "run"
+    done = fdem("run", "quick-start", *SCENE, "--out", str(out))
+    assert done.returncode == 0, done.stdout + done.stderr
+    return out
+
+
+def assert_same_run(a: Path, b: Path) -> None:
+    sa, sb = state(a / "final_state.npz"), state(b / "final_state.npz")
+    assert sa["step"] == sb["step"] and sa["time"] == sb["time"]
+    assert np.array_equal(sa["x"], sb["x"]) and np.array_equal(sa["v"], sb["v"])
+    assert (a / "history.csv").read_bytes() == (b / "history.csv").read_bytes()
+    ja, jb = json.loads((a / "summary.json").read_text()), json.loads((b / "summary.json").read_text())
+    assert [(s["name"], s["reason"], s["steps"]) for s in ja["workflow"]["stages"]] == \
+        [(s["name"], s["reason"], s["steps"]) for s in jb["workflow"]["stages"]]
+    assert ja["runout"]["runout_distance_m"] == jb["runout"]["runout_distance_m"]
+
+
+def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
+    out = tmp_path / "run"
+    proc = start(out)
+    wait_for_rows(out, proc, 40)
+    proc.send_signal(signal.SIGTERM)
+    log = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 143, log
+    record = json.loads((out / "run.json").read_text())
+    assert record["outcome"] == "interrupted" and record["exit_code"] == 143
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and "SIGTERM" in summary["ending"]
+    assert (out / "checkpoint.npz").is_file() and (out / "interrupted_state.npz").is_file()
+    resumed = fdem("run", "quick-start", "--resume", str(out))
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert "resumed from" in resumed.stdout
+    assert_same_run(uninterrupted, out)
+    # the interrupted state is a checkpoint too: it loads (it has no journal, so it is not resumable)
+    assert state(out / "interrupted_state.npz")["step"] > 0
+
+
+def test_sigkill_then_resume_from_the_periodic_checkpoint(uninterrupted, tmp_path):
+    out = tmp_path / "run"
+    proc = start(out, "--checkpoint-every", "0.3")
+    checkpoint = out / "checkpoint.npz"
+    wait_for_rows(out, proc, 40)
+    t0 = time.monotonic()
+    while not checkpoint.exists() and time.monotonic() - t0 < 60:
+        time.sleep(0.05)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert json.loads((out / "run.json").read_text())["outcome"] == "running"  # killed: no ending written
+    resumed = fdem("run", "quick-start", "--resume", str(out))
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert_same_run(uninterrupted, out)
+
+
+def test_resume_refuses_changed_options_and_finished_runs(uninterrupted, tmp_path):
+    changed = fdem("run", "quick-start", "--resume", str(uninterrupted), "--size", "1.0")
+    assert changed.returncode == 2 and "--size" in changed.stderr
+    finished = fdem("run", "quick-start", "--resume", str(uninterrupted))
+    assert finished.returncode == 2 and "has finished" in finished.stderr
+    other = fdem("run", "four-slopes", "--resume", str(uninterrupted))
+    assert other.returncode == 2 and "quick-start" in other.stderr
+
+
+def test_out_folder_holding_a_run_is_refused_unless_overwrite(uninterrupted, tmp_path):
+    again = fdem("run", "quick-start", *SCENE, "--out", str(uninterrupted), "--max-time", "0.01")
+    assert again.returncode == 2 and "--overwrite" in again.stderr
+    out = tmp_path / "run"
+    first = fdem("run", "quick-start", *SCENE, "--out", str(out), "--max-time", "0.2")
+    assert first.returncode == 0, first.stderr
+    frames = sorted(p.name for p in out.glob("slope_*.vtu"))
+    (out / "slope_99999.vtu").write_text("a frame of the earlier run")
+    second = fdem("run", "quick-start", *SCENE, "--out", str(out), "--max-time", "0.05", "--overwrite")
+    assert second.returncode == 0, second.stderr
+    assert not (out / "slope_99999.vtu").exists()  # the earlier run's frames do not mix with the new ones
+    assert len(list(out.glob("slope_*.vtu"))) <= len(frames)
+
+
+def test_out_folder_that_cannot_be_written_is_refused_before_meshing(tmp_path):
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a folder")
+    r = fdem("run", "quick-start", *SCENE, "--out", str(a_file))
+    assert r.returncode == 2 and "is a file" in r.stderr
+    r = fdem("run", "quick-start", *SCENE, "--out", str(a_file / "below"))
+    assert r.returncode == 2 and "cannot be written" in r.stderr
+    if os.geteuid() != 0:  # root writes anywhere: the permission probe means nothing there
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o500)
+        r = fdem("run", "quick-start", *SCENE, "--out", str(locked / "run"))
+        assert r.returncode == 2 and "cannot be written" in r.stderr
+
+
+def test_unstable_run_resumes_with_a_smaller_step(tmp_path, monkeypatch):
+    """A run made unstable on purpose (its critical step overstated 4x) ends ``unstable`` with
+    the reason and a good checkpoint; resumed with the true step, the same workflow finishes."""
+    from fdem.cases import quick_start
+    from fdem.solve.simulation import Simulation
+    from fdem.workflow.journal import CHECKPOINT_NAME, RunJournal
+    from fdem.workflow.slope import SlopeWorkflow, run_slope_workflow
+
+    out = tmp_path / "run"
+    _, sim, _, _ = quick_start.build(2.0, out, progress=False)
+    true_dt = Simulation.critical_dt
+    journal = RunJournal(out / CHECKPOINT_NAME)
+    wf = SlopeWorkflow(factors=(1.0 / 0.9,), runout_time=0.5)
+    with monkeypatch.context() as m:  # the equilibrium stage runs right, the first reduction step blows up
+        m.setattr(Simulation, "critical_dt", lambda self: (lambda c, d: (c * (4.0 if self.state.step > 0 else 1.0), d))(
+            *true_dt(self)))
+        result = run_slope_workflow(sim, wf, out_dir=out, journal=journal)
+    assert result["outcome"] == "unstable" and "unstable at step" in result["ending"]
+    assert [s["name"] for s in result["stages"]] == ["equilibrium"]
+    good = state(out / CHECKPOINT_NAME)
+    assert np.all(np.isfinite(good["x"])) and good["step"] == result["stages"][0]["steps"]
+    sim.close()
+    _, again, _, _ = quick_start.build(2.0, out, progress=False)
+    journal = RunJournal.resume_from(again, out / CHECKPOINT_NAME)
+    result = run_slope_workflow(again, wf, out_dir=out, journal=journal)
+    again.close()
+    assert result["outcome"] in ("stable", "failed")
+    assert [s["name"] for s in result["stages"]][:2] == ["equilibrium", "reduction_F1.111"]
+
+
+def test_checkpoint_of_another_model_names_what_differs(tmp_path):
+    from fdem.cases import quick_start
+    from fdem.solve.checkpoint import load_checkpoint, save_checkpoint
+
+    _, sim, _, _ = quick_start.build(2.0, None, progress=False)
+    path = save_checkpoint(sim, tmp_path / "c.npz")
+    _, other, _, _ = quick_start.build(2.0, None, progress=False)
+    other.model.gravity[:] = (0.0, -5.0)
+    with pytest.raises(ValueError, match="gravity"):
+        load_checkpoint(other, path)
+    _, other, _, _ = quick_start.build(2.0, None, progress=False)
+    other.cracks.interfaces.property_sets[1] = quick_start.property_sets(penalty=2 * quick_start.PENALTY)[1]
+    with pytest.raises(ValueError, match="crack-element property sets"):
+        load_checkpoint(other, path)
+    state_file = tmp_path / "s.npz"
+    np.savez(state_file, x=sim.state.x, v=sim.state.v, x0=sim.x0, triangles=sim.triangles)
+    with pytest.raises(ValueError, match="state file"):
+        load_checkpoint(sim, state_file)
