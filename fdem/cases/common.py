@@ -44,7 +44,7 @@ from pathlib import Path
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
            "prepare_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
-           "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS"]
+           "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report"]
 
 CONFIRM_ABOVE_HOURS = 12.0
 """A run whose estimated wall time is above this asks for ``--yes`` (refused without it when no
@@ -162,7 +162,7 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
             parser.error(f"--resume {folder}: that folder holds a run of {record.get('case')!r}, not {name!r}")
         if not any(folder.glob("checkpoint.npz")) and not any(folder.glob("*/checkpoint.npz")):
             parser.error(f"--resume {folder}: no checkpoint.npz there (the run wrote none before it stopped)")
-        if record.get("outcome") not in (None, "interrupted", "unstable", "running", "error"):
+        if record.get("outcome") not in (None, "interrupted", "unstable", "running", "error", "write_error"):
             parser.error(f"--resume {folder}: that run has finished (outcome {record['outcome']!r}); nothing to resume")
         others = [o for o in _option_names(argv) if o not in RESUME_OPTIONS + ("--resume",)]
         if others:
@@ -324,10 +324,35 @@ def exit_code(summary) -> int:
     return 1 if outcome in ("unstable", "error", "write_error") else 0
 
 
-def finish_run(out, summary: dict) -> None:
-    """Say in ``run.json`` how the run ended (outcome, ending, exit code, when)."""
+def write_report(report, out, extra: dict, pictures_on: bool) -> dict:
+    """``report.write(out, extra=..., pictures_on=...)`` (:class:`fdem.results.report.RunReport`),
+    or, when a file cannot be written (a full disk, a folder gone read-only), the summary the run
+    still has, with outcome ``write_error`` and the reason, written if the disk takes it."""
     from fdem.io.jsonable import write_json
 
+    try:
+        return report.write(out, extra=extra, pictures_on=pictures_on)
+    except OSError as err:
+        what = f"{err.strerror} ({err.filename})" if err.strerror and err.filename else str(err)
+        summary = {**extra, "outcome": "write_error", "ending": f"could not write the outputs: {what}"}
+        print(f"could not write the outputs: {what}", file=sys.stderr)
+        try:
+            write_json(Path(out) / "summary.json", summary)
+        except OSError:
+            pass
+        return summary
+
+
+def finish_run(out, summary: dict) -> None:
+    """Say in ``run.json`` how the run ended (outcome, ending, exit code, when), and, for an
+    ending that is not a finish, print why and how to resume."""
+    from fdem.io.jsonable import write_json
+
+    if summary.get("outcome") in ("interrupted", "unstable", "write_error"):
+        record = _read_run_file(Path(out))
+        print(f"{summary['outcome']}: {summary.get('ending')}\nresume with: fdem run {record.get('case', 'NAME')} "
+              f"--resume {out}" + (" --dt-fraction 0.4 (a smaller step)" if summary["outcome"] == "unstable" else ""),
+              file=sys.stderr)
     folder = Path(out)
     record = _read_run_file(folder)
     record.update(outcome=summary.get("outcome", "finished"), ending=summary.get("ending"),

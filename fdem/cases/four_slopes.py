@@ -34,7 +34,7 @@ import numpy as np
 from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
                                finish_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling)
+                               use_density_scaling, write_report)
 
 import math
 from fdem.mesh.topology import INTACT
@@ -289,7 +289,7 @@ def main(argv=None) -> dict:
         journal = start_journal(sim, args)
         try:
             result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
-            if result["outcome"] != "unstable":  # an unstable state is no state to restart from
+            if result["outcome"] not in ("unstable", "write_error"):  # no state to restart from, or no room
                 save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
         finally:
             sim.close()
@@ -299,7 +299,10 @@ def main(argv=None) -> dict:
                         **factor_of_safety_figures(result),
                         "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
                         "seconds_simulation": time.perf_counter() - t1})
-        summary = run_report.write(out, extra=summary, pictures_on=not args.no_pictures)
+        summary = write_report(run_report, out, summary, pictures_on=not args.no_pictures)
+        if summary["outcome"] == "write_error":
+            finish_run(out, summary)
+            return summary
         for st in result["stages"]:
             print(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
                   f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")

@@ -40,7 +40,7 @@ import numpy as np
 from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
                                finish_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling)
+                               use_density_scaling, write_report)
 
 __all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
            "FOS_BRACKET", "geometry", "property_sets", "build", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
@@ -156,7 +156,7 @@ def main(argv=None) -> dict:
     journal = start_journal(sim, args)
     try:
         result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
-        if result["outcome"] != "unstable":  # the end state, to restart from or look at
+        if result["outcome"] not in ("unstable", "write_error"):  # the end state, to restart from or look at
             save_checkpoint(sim, out / "final_state.npz")
     finally:
         sim.close()
@@ -165,7 +165,10 @@ def main(argv=None) -> dict:
              "failed_at_factor": result["failed_at_factor"], "outcome": result["outcome"],
              "ending": result.get("ending"), "checkpoints": journal.writes, "cost_estimate": cost,
              **factor_of_safety_figures(result), "wall_seconds": time.perf_counter() - wall}
-    summary = report.write(out, extra=extra, pictures_on=not args.no_pictures)
+    summary = write_report(report, out, extra, pictures_on=not args.no_pictures)
+    if summary["outcome"] == "write_error":
+        finish_run(out, summary)
+        return summary
     summary["wall_seconds"] = time.perf_counter() - wall
     write_json(out / "summary.json", summary)
     finish_run(out, summary)

@@ -174,6 +174,12 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         if (journal is not None and journal.current is None and not STOP.forced
                 and not journal.writes[-1:] == [("interrupted", sim.state.step)]):
             journal.write(sim, "interrupted")  # between stages (or in a factor-of-safety trial: its start state)
+    except OSError as err:
+        # a frame or checkpoint could not be written (a full disk, a folder gone read-only): the
+        # run stops with the reason; the stages so far and the last checkpoint are kept
+        what = f"{err.strerror} ({err.filename})" if err.strerror and err.filename else str(err)
+        summary["outcome"] = "write_error"
+        summary["ending"] = f"could not write: {what} at t = {sim.state.time:.6g} s"
     except InstabilityError as err:
         # the guard stopped an unstable step: the summary says why and where, the journal's
         # checkpoint (the last stage end or periodic write) is the good state to resume from

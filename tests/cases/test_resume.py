@@ -192,3 +192,23 @@ def test_checkpoint_of_another_model_names_what_differs(tmp_path):
     np.savez(state_file, x=sim.state.x, v=sim.state.v, x0=sim.x0, triangles=sim.triangles)
     with pytest.raises(ValueError, match="state file"):
         load_checkpoint(sim, state_file)
+
+
+def test_a_full_disk_ends_with_a_message_a_summary_and_exit_1(tmp_path):
+    """On a 2 MB tmpfs the frames fill the disk mid-run: one line on stderr (no traceback), exit
+    1, and the summary and run.json say ``write_error`` with the reason."""
+    small = tmp_path / "small"
+    small.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(small)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs here (needs root)")
+    try:
+        r = fdem("run", "quick-start", *SCENE, "--out", str(small / "run"))
+        assert r.returncode == 1, r.stdout + r.stderr
+        assert "Traceback" not in r.stderr and "No space left on device" in r.stderr
+        summary = json.loads((small / "run" / "summary.json").read_text())
+        record = json.loads((small / "run" / "run.json").read_text())
+        assert summary["outcome"] == record["outcome"] == "write_error"
+        assert "No space left" in record["ending"] and record["exit_code"] == 1
+    finally:
+        subprocess.run(["umount", str(small)], capture_output=True)
