@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import case_parser, check_common, set_threads
+from fdem.cases.common import case_parser, check_common, finish_run, prepare_run, set_threads
 from fdem.physics.crack_properties import CrackProperties
 from fdem.physics.cracks import CrackSet
 from fdem.physics.contact import ContactSet
@@ -267,6 +267,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
+    if args.damping_study is None:
+        args = prepare_run(None, args, argv, NAME)
     set_threads(args.threads)
     if args.damping_study is not None:
         damping_study(args.damping_study)
@@ -280,6 +282,7 @@ def main(argv=None) -> dict:
     r = {"case": NAME, **r, "time_capped": t_end < args.t_end}
     print(dumps(r, indent=1))
     write_json(args.out / "summary.json", r, indent=1)
+    finish_run(args.out, r)
     return r
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import case_parser, check_common, set_threads
+from fdem.cases.common import case_parser, check_common, finish_run, prepare_run, set_threads
 from fdem.physics.crack_properties import CrackProperties
 from fdem.physics.cracks import CrackSet
 from fdem.geometry.section import Geometry
@@ -198,6 +198,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
+    args = prepare_run(None, args, argv, NAME)
     set_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
@@ -220,6 +221,7 @@ def main(argv=None) -> dict:
     if not args.no_pictures:
         written.append(load_plot(results, args.out / "brazilian_load.png"))
     print("wrote " + ", ".join(map(str, written)))
+    finish_run(args.out, summary)
     return summary
 
 

@@ -147,11 +147,15 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
     (:data:`RESUME_OPTIONS`). Otherwise ``--out`` must be a folder that can be created and
     written, and must not hold another run unless ``--overwrite`` (which removes that run's
     outputs first, so that old frames never mix with new ones). Every refusal is a
-    ``parser.error`` (exit code 2) naming the folder and what to do."""
+    ``parser.error`` (exit code 2) naming the folder and what to do. ``parser=None``: the case
+    checked its options itself (a ``parse_args`` function); errors then name ``fdem run NAME``."""
     import sys as _sys
 
     argv = list(_sys.argv[1:] if argv is None else argv)
-    check_common(parser, args)  # the options first: a bad one is named before the folder is looked at
+    if parser is None:
+        parser = argparse.ArgumentParser(prog=f"fdem run {name}")
+    else:
+        check_common(parser, args)  # the options first: a bad one is named before the folder is looked at
     resume = getattr(args, "resume", None)
     if resume is not None:
         folder = Path(resume)
@@ -189,7 +193,7 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
         parser.error(f"--out {out} cannot be written: {err.strerror or err}")
     earlier = _read_run_file(out)
     held = earlier or (out / "summary.json").exists() or any(out.glob("*.pvd"))
-    if held and not args.overwrite:
+    if held and not getattr(args, "overwrite", False):
         what = (f"a run of {earlier.get('case')!r} started {earlier.get('started')} (outcome {earlier.get('outcome')})"
                 if earlier else "the outputs of an earlier run")
         parser.error(f"--out {out} holds {what}; give --overwrite to replace it"

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.block_on_incline import CONTACT_PENALTY, G, YOUNG, check_scene, incline_model, unbreakable
-from fdem.cases.common import check_common, set_threads
+from fdem.cases.common import check_common, finish_run, prepare_run, set_threads
 from fdem.physics.cracks import CrackSet
 from fdem.physics.contact import ContactSet
 from fdem.solve.model import DEFAULT_ELEMENT_DAMPING
@@ -169,6 +169,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     """The command line's options, checked before anything is meshed (``parser.error``, exit
     status 2): at least one ``--size``, each positive and at most the 1 m block's side."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--overwrite", action="store_true", help="replace the earlier run in --out")
     parser.add_argument("--out", type=Path, default=Path("runs/newmark"),
                         help="folder for newmark.json and newmark.png (default runs/newmark; the committed figures: --out docs/verification)")
     parser.add_argument("--size", type=float, nargs="*", default=list(SIZES), help="element sizes [m]")
@@ -190,6 +191,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None):
     args = parse_args(argv)
+    args = prepare_run(None, args, argv, "newmark-block")
     set_threads(args.threads)
     rows = []
     args.out.mkdir(parents=True, exist_ok=True)
@@ -206,6 +208,7 @@ def main(argv=None):
                     "runs": rows}, indent=1)
     if not args.no_pictures:
         plot(rows, args.out / "newmark.png")
+    finish_run(args.out, {"outcome": "finished"})
     return {"runs": rows}
 
 

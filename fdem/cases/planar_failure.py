@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import check_common, set_threads
+from fdem.cases.common import check_common, finish_run, prepare_run, set_threads
 from fdem.physics.crack_properties import CrackProperties
 from fdem.physics.cracks import CrackSet
 from fdem.physics.contact import ContactSet
@@ -350,6 +350,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     """The command line's options, checked (``parser.error``, exit status 2, on a bad one)
     before anything is meshed."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--overwrite", action="store_true", help="replace the earlier run in --out")
     parser.add_argument("--out", type=Path, default=Path("runs/planar_failure"))
     parser.add_argument("--size", type=float, nargs="+", default=[1.0, 0.7, 0.5],
                         help="element sizes [m], one run per size and geometry")
@@ -393,6 +394,7 @@ def check_search(parser: argparse.ArgumentParser, args) -> None:
 
 def main(argv=None) -> list:
     args = parse_args(argv)
+    args = prepare_run(None, args, argv, "planar-failure")
     set_threads(args.threads)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -420,6 +422,7 @@ def main(argv=None) -> list:
     print(f"wrote {args.out / 'planar_failure.json'}")
     if not args.no_pictures and any(r["fos"] is not None for r in rows):
         print(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")
+    finish_run(args.out, {"outcome": "finished"})
     return rows
 
 

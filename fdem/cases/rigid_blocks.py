@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 
 from fdem.blocks.slope import MERGE_BELOW, analyse, print_rigid_blocks, rigid_block_line
-from fdem.cases.common import case_parser, check_common
+from fdem.cases.common import case_parser, check_common, finish_run, prepare_run
 
 __all__ = ["NAME", "MERGE_BELOW", "analyse", "rigid_block_line", "print_rigid_blocks", "Scene", "SCENES", "two_set_geometry", "two_set_property_sets", "sine_record",
            "screen_ensemble", "main"]
@@ -211,8 +211,8 @@ def main(argv=None) -> dict:
     from fdem.blocks.pictures import save_mechanism
     from fdem.io.jsonable import jsonable, write_json
 
+    args = prepare_run(parser, args, argv, NAME)
     out = args.out
-    out.mkdir(parents=True, exist_ok=True)
     if args.ensemble is not None:
         if not args.ensemble.is_file():
             parser.error(f"--ensemble: no file {args.ensemble}")
@@ -222,6 +222,7 @@ def main(argv=None) -> dict:
                   f"({r['seconds']:.2f} s), FDEM {r['fdem_fos']:.3f} ({r['fdem_seconds']:.0f} s)")
         summary = jsonable({"case": NAME, "ensemble": str(args.ensemble), "realizations": rows})
         write_json(out / "summary.json", summary)
+        finish_run(out, summary)
         print(f"wrote {out / 'summary.json'}")
         return summary
     names = list(SCENES) if "all" in args.scene else args.scene
@@ -262,5 +263,6 @@ def main(argv=None) -> dict:
     summary["outcome"] = "error" if failed else "finished"   # a scene without an answer fails the command
     summary = jsonable(summary)     # what summary.json holds, returned as such
     write_json(out / "summary.json", summary)
+    finish_run(out, summary)
     print(f"wrote {out / 'summary.json'}" + (f"; no answer for {', '.join(failed)}" if failed else ""))
     return summary
