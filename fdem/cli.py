@@ -4,6 +4,7 @@
 ``fdem run NAME [options]``         run a case (``fdem run NAME --help`` lists its options)
 ``fdem demo [options]``             the same as ``fdem run quick-start``
 ``fdem info FILE.msh``              quality report and crack-element counts of a mesh
+``fdem --version``                  the installed version (``python -m fdem`` is the same command)
 
 Every case takes ``--out``, ``--size``, ``--threads``, ``--max-time`` and ``--no-pictures``
 (:mod:`fdem.cases.common`).
@@ -92,9 +93,19 @@ def _info(args) -> int:
     return 0
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fdem")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "(not installed)"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="fdem", description="Hybrid finite-discrete element solver for rock slopes",
                                      epilog="fdem run NAME --help lists a case's options")
+    parser.add_argument("--version", action="version", version=f"fdem {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="the cases fdem can run").set_defaults(func=_list)
     run = sub.add_parser("run", help="run a case: fdem run NAME [--out DIR --size H --threads N --max-time T "

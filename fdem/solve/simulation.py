@@ -43,6 +43,7 @@ If a provider has no ``energy_terms``, its energy is taken as ``-interaction_wor
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
@@ -570,7 +571,8 @@ class Simulation:
         if self._frames == 0:
             self.write_output()
         bar = None
-        if self.progress if progress is None else progress:
+        # a bar only for a person at a terminal: in a log file it is thousands of lines of noise
+        if (self.progress if progress is None else progress) and sys.stderr.isatty():
             from tqdm import tqdm
 
             bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)

@@ -478,7 +478,7 @@ def run_ensemble(ensemble: Ensemble, out, workers: int = 2, scheduler: str | Non
                 futures = client.map(realize, [ensemble] * len(todo), todo, [samples[i] for i in todo], pure=False)
                 index_of = {f.key: i for f, i in zip(futures, todo)}
                 bar = None
-                if progress:
+                if progress and sys.stderr.isatty():
                     from tqdm import tqdm
 
                     bar = tqdm(total=len(todo), desc="realizations", unit="run")

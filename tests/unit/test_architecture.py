@@ -21,7 +21,7 @@ LAYERS = {  # subpackage (or top-level module) -> floor
     "results": 6,
     "workflow": 7,
     "cases": 8,
-    "cli": 9, "": 9,
+    "cli": 9, "__main__": 9, "": 9,
 }
 
 
