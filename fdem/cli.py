@@ -33,9 +33,10 @@ def _run_case(name: str, argv: list[str]) -> int:
     from fdem.cases.common import set_threads
 
     for i, a in enumerate(argv):
-        if a == "--threads" and i + 1 < len(argv) and argv[i + 1].isdigit():
+        # (0 is left to the case's own check, which names the option)
+        if a == "--threads" and i + 1 < len(argv) and argv[i + 1].isdigit() and int(argv[i + 1]) > 0:
             set_threads(int(argv[i + 1]))
-        elif a.startswith("--threads=") and a.split("=", 1)[1].isdigit():
+        elif a.startswith("--threads=") and a.split("=", 1)[1].isdigit() and int(a.split("=", 1)[1]) > 0:
             set_threads(int(a.split("=", 1)[1]))
     try:
         module = case_module(name)
@@ -85,6 +86,9 @@ def _info(args) -> int:
     from fdem.mesh.quality import quality_report
     from fdem.mesh.topology import build_topology
 
+    if not Path(args.mesh).is_file():
+        print(f"fdem info: no mesh file {args.mesh}", file=sys.stderr)
+        return 2
     mesh = Mesh.load(args.mesh)
     topo = build_topology(mesh)
     print(quality_report(mesh))

@@ -43,7 +43,7 @@ from pathlib import Path
 
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
-           "prepare_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
+           "prepare_run", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
            "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report"]
 
 CONFIRM_ABOVE_HOURS = 12.0
@@ -139,8 +139,12 @@ def _read_run_file(folder: Path) -> dict:
         return {}
 
 
-def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
+def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now: bool = True):
     """Check the output folder before any work and write ``run.json``; returns ``args``.
+
+    ``open_now=False`` only resolves ``--resume`` (the options it restores) and leaves the
+    folder and ``run.json`` to :func:`open_run`, for a case that checks more of its own options
+    first: a refused option must not leave a ``run.json`` behind.
 
     With ``--resume DIR`` the options come from ``DIR/run.json`` (the run must be this case's,
     not finished, with its ``checkpoint.npz``), plus the few a resume may change
@@ -179,8 +183,23 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
         check_common(parser, args)
         record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
                       resumed_with=again, resumed_at=_now())
-        _write_run_file(parser, folder, record)
-        return args
+        args.run_record = record
+    else:
+        args.run_record = {"case": name, "argv": [a for a in argv if a != "--overwrite"]}
+    if open_now:
+        open_run(parser, args, name)
+    return args
+
+
+def open_run(parser: argparse.ArgumentParser | None, args, name: str) -> None:
+    """The folder part of :func:`prepare_run`: probe ``--out``, refuse or clear an earlier run,
+    write ``run.json`` (or, resuming, update it)."""
+    if parser is None:
+        parser = argparse.ArgumentParser(prog=f"fdem run {name}")
+    record = args.run_record
+    if getattr(args, "resume", None) is not None:
+        _write_run_file(parser, Path(args.out), record)
+        return
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         parser.error(f"--out {out} is a file, not a folder")
@@ -204,10 +223,8 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str):
         for f in out.iterdir():
             if f.is_file() and (f.suffix in OUTPUT_SUFFIXES or f.name.endswith(".tmp.npz")):
                 f.unlink()
-    _write_run_file(parser, out, {"case": name, "argv": [a for a in argv if a != "--overwrite"],
-                                  "started": _now(), "outcome": "running", "fdem_version": _version(),
+    _write_run_file(parser, out, {**record, "started": _now(), "outcome": "running", "fdem_version": _version(),
                                   "pid": os.getpid()})
-    return args
 
 
 def _now() -> str:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
-                               finish_run, prepare_run, report_runout_cost,
+                               finish_run, open_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
                                use_density_scaling, write_report)
 
@@ -209,7 +209,7 @@ def main(argv=None) -> dict:
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
     add_resume_options(parser)
-    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
+    args = prepare_run(parser, parser.parse_args(argv), argv, NAME, open_now=False)
     check_common(parser, args)
     if not 0.0 < args.runout_dt_fraction <= 1.0:
         parser.error(f"--runout-dt-fraction must lie in (0, 1], got {args.runout_dt_fraction}")
@@ -243,6 +243,7 @@ def main(argv=None) -> dict:
         check_mesh_size(parser, four_slope_geometry(args.angle, spacing, joint_offset=args.joint_offset), args.size)
     except ValueError as err:  # a bad geometry option: say what is wrong, no traceback
         parser.error(str(err))
+    open_run(parser, args, NAME)  # every option checked: now the folder and run.json
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, finish_run,
-                               prepare_run, set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh,
+                               open_run, prepare_run, set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh,
                                time_capped, use_density_scaling)
 
 from fdem.geometry.joint_sets import SegmentSet
@@ -259,7 +259,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--gravity-factor", type=float, default=None,
                         help="skip the search and load at this gravity factor")
     add_resume_options(parser)
-    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
+    args = prepare_run(parser, parser.parse_args(argv), argv, NAME, open_now=False)
     check_common(parser, args)
     for name, value, low in (("--upper", args.upper, 1.0), ("--tol", args.tol, 0.0),
                              ("--runout-time", args.runout_time, 0.0), ("--gravity-factor", args.gravity_factor, 0.0)):
@@ -269,6 +269,7 @@ def main(argv=None) -> dict:
         parser.error(f"--overload must be a fraction >= 0, got {args.overload}")
     if args.workers < 1:
         parser.error(f"--workers must be at least 1, got {args.workers}")
+    open_run(parser, args, NAME)  # every option checked: now the folder and run.json
     set_threads(args.threads)
     rules = ["pitch", "gap"] if args.spacing_rule == "both" else [args.spacing_rule]
     results = {}
