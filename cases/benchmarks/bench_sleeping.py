@@ -5,7 +5,7 @@ before the runout (``runs/bench_sleeping/<scene>/runout_start.npz``); the runout
 workflow (:func:`fdem.workflow.slope.runout_stage`: undamped, time-step factor 0.4, to rest or
 its cap) is then run from that state in a freshly built simulation with sleeping off and with
 the default :class:`~fdem.solve.sleeping.SleepPolicy` (or the one of the options), and with ``--seeds`` runs without sleeping
-whose velocities are first nudged by 1e-6 m/s (the chaotic spread, as ``docs/pareto.md``).
+whose velocities are first nudged by ``--kick`` (default 1e-6 m/s; the chaotic spread, as ``docs/pareto.md``).
 ``--whole`` also runs the whole workflow (equilibrium, reduction steps, runout) with sleeping on
 from the start.
 
@@ -71,7 +71,7 @@ def failed_state(scene: str, size: float | None) -> tuple[Path, dict]:
 
 
 def runout(scene: str, size: float | None, start: Path, sleeping, seed: int | None,
-           max_time: float | None) -> dict:
+           max_time: float | None, kick: float = 1e-6) -> dict:
     """The workflow's runout stage from ``start``, sleeping off (``None``) or with the policy
     ``sleeping``; its figures."""
     from fdem.results.analysis import runout as runout_figures
@@ -88,7 +88,7 @@ def runout(scene: str, size: float | None, start: Path, sleeping, seed: int | No
     sim.load_state_dict(saved["state"])
     sim.set_sleeping(sleeping)
     if seed is not None:
-        sim.state.v += 1e-6 * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
+        sim.state.v += kick * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
     topo = sim.model.topology
     broken0 = int(sim.cracks.broken.sum())
     step0, t_start, n_hist = sim.state.step, sim.state.time, len(sim.history)
@@ -105,7 +105,7 @@ def runout(scene: str, size: float | None, start: Path, sleeping, seed: int | No
     out = {"scene": scene, "size": size, "sleeping": sleeping is not None,
            "policy": None if sleeping is None else {k: getattr(sleeping, k) for k in sleeping.__dataclass_fields__},
            "quiet_time_s": None if sim.sleeping is None else sim.sleeping.quiet_time,
-           "delta_m": None if sim.sleeping is None else sim.sleeping.delta, "seed": seed, "reason": res.reason,
+           "delta_m": None if sim.sleeping is None else sim.sleeping.delta, "seed": seed, "kick_m_s": kick if seed is not None else 0.0, "reason": res.reason,
            "n_triangles": topo.n_triangles, "steps": steps, "simulated_s": sim.state.time - t_start,
            "wall_s": wall, "ms_per_step": 1e3 * wall / max(steps, 1),
            "stepped_fraction": stepped / max(steps * topo.n_triangles, 1),
@@ -127,6 +127,7 @@ def main(argv=None) -> None:
     parser.add_argument("--scene", choices=("demo", "four-slopes"), default="demo")
     parser.add_argument("--size", type=float, default=None, help="element size [m] (default: the scene's)")
     parser.add_argument("--seeds", type=int, default=0, help="runs without sleeping, velocities nudged by 1e-6 m/s: the chaotic spread")
+    parser.add_argument("--kick", type=float, default=1e-6, help="nudge of the --seeds runs [m/s] (default 1e-6)")
     parser.add_argument("--max-time", type=float, default=None, help="cap on the runout's simulated time [s]")
     parser.add_argument("--acceleration-ratio", type=float, default=None,
                         help="SleepPolicy.acceleration_ratio (default the policy's)")
@@ -151,7 +152,7 @@ def main(argv=None) -> None:
     policy = SleepPolicy(**policy)
     runs = [runout(args.scene, args.size, start, None, None, args.max_time),
             runout(args.scene, args.size, start, policy, None, args.max_time)]
-    runs += [runout(args.scene, args.size, start, None, k, args.max_time) for k in range(args.seeds)]
+    runs += [runout(args.scene, args.size, start, None, k, args.max_time, args.kick) for k in range(args.seeds)]
     records = []
     for r in runs:
         tag = f"{args.scene} runout, sleeping {'on' if r['sleeping'] else 'off'}" + (
