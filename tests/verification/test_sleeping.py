@@ -187,3 +187,22 @@ def test_awake_ranges_cover_the_awake_regions():
     expected = np.repeat(awake, 10)[:65]
     assert np.array_equal(covered, expected)
     assert awake_ranges(np.zeros(3, bool), 10, 30).tolist() == [[0, 0]]
+
+
+def test_planar_slope_fos_bracket_is_the_same_with_sleeping(monkeypatch):
+    """Strength reduction on the no-crack planar slope (236 triangles), bisected on [1.2, 1.6]
+    (as ``test_memory_order.py``): with sleeping on, the same trials, verdicts, steps and
+    bracket, around the Hoek-Bray factor 1.396 (damped trials never sleep)."""
+    import functools
+
+    import fdem.cases.planar_failure as pf
+
+    plain = pf.run_case("no_crack", size=2.0, lower=1.2, upper=1.6, tol=0.1)
+    monkeypatch.setattr(pf, "Simulation", functools.partial(Simulation, sleeping=True))
+    sleeping = pf.run_case("no_crack", size=2.0, lower=1.2, upper=1.6, tol=0.1)
+    assert sleeping["bracket"] == plain["bracket"]
+    lo, hi = plain["bracket"]
+    assert lo <= plain["analytic_fos"] <= hi
+    for a, b in zip(plain["trials"], sleeping["trials"]):
+        assert (a["factor"], a["stable"], a["steps"]) == (b["factor"], b["stable"], b["steps"])
+        assert a["max_displacement"] == b["max_displacement"]
