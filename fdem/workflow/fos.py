@@ -206,12 +206,13 @@ def _trial_stage_at(trial: Stage, factor: float) -> Stage:
                                gravity_factor=None)
 
 
-def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[Trial, dict | None]:
-    """One trial on ``sim`` (already restored to the starting state): the verdict, and for a
-    failing trial what it broke (failure surface, broken elements, positions, modes)."""
+def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None) -> tuple[Trial, dict | None]:
+    """One trial on ``sim`` (already restored to the starting state): the verdict (the stage
+    converged, or ``judge(sim, result)`` when given), and for a failing trial what it broke
+    (failure surface, broken elements, positions, modes)."""
     trigger.apply(sim, factor)
     result = run_stage(sim, _trial_stage_at(trial, factor), frames=False)
-    stable = result.reason == "converged"
+    stable = bool(judge(sim, result)) if judge is not None else result.reason == "converged"
     info = None
     cracks = sim.cracks
     if not stable and cracks is not None:
@@ -223,7 +224,7 @@ def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float) -> tuple[T
 _WORKER: dict = {}
 
 
-def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float):
+def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float, judge=None):
     """A trial in a worker process: build the scene once, load the equilibrium checkpoint, then
     restart every trial from it."""
     from fdem.solve.checkpoint import load_checkpoint, restore, snapshot
@@ -236,12 +237,13 @@ def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Sta
         _WORKER.update(key=key, sim=sim, start=snapshot(sim))
     sim = _WORKER["sim"]
     restore(sim, _WORKER["start"])
-    return _run_trial(sim, trigger, trial, factor)
+    return _run_trial(sim, trigger, trial, factor, judge)
 
 
 def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
                      trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
-                     build=None, build_args: tuple = (), max_trials: int = DEFAULT_MAX_TRIALS) -> FoSResult:
+                     build=None, build_args: tuple = (), max_trials: int = DEFAULT_MAX_TRIALS,
+                     judge=None) -> FoSResult:
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
@@ -263,6 +265,12 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     builds the scene with ``build(*build_args)`` (a picklable, module-level function returning
     a simulation of the same mesh and providers as ``sim``) and restarts its trials from a
     checkpoint of ``sim`` (:func:`fdem.solve.checkpoint.save_checkpoint`; in ``out_dir`` when given).
+
+    ``judge(sim, stage_result) -> bool`` (optional): the verdict of a trial, called on the trial's
+    end state, for trials that end by their duration rather than by convergence (a shaken slope
+    judged by its permanent displacement, :class:`fdem.workflow.seismic.BaseShaking`); the trial
+    stage then needs no converge rule. Without it a trial is stable when its stage converged.
+    With ``workers > 1`` it must be picklable.
     """
     from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
 
@@ -275,8 +283,9 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                          "simulation identical to sim (the workers restart trials from a checkpoint of sim)")
     trigger = trigger or StrengthReduction()
     trial = trial or default_trial_stage(sim)
-    if trial.converge is None:
-        raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence)")
+    if trial.converge is None and judge is None:
+        raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
+                         "or a judge of its end state")
     start_factor = trigger.current(sim)
     start = snapshot(sim)
     cracks = sim.cracks
@@ -318,9 +327,9 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             out = []
             for f in factors:
                 restore(sim, start)
-                out.append(record(_run_trial(sim, trigger, trial, f)))
+                out.append(record(_run_trial(sim, trigger, trial, f, judge)))
             return out
-        futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f)
+        futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)
                    for f in factors]
         return [record(fut.result()) for fut in futures]
 
@@ -333,7 +342,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         if ends[1]:
             r = trials[1].result
             raise BracketError(f"factor_of_safety: the slope is still stable at the upper factor F = {upper:g} "
-                               f"(converged {r.detail}); raise the bracket", trials[1])
+                               f"({r.reason} {r.detail}); raise the bracket", trials[1])
         lo, hi = lower, upper
         ended_by = "tolerance"
         while hi - lo > tol:
