@@ -13,6 +13,7 @@ Prints and saves ``docs/benchmarks/runout_step.json`` (distance, broken elements
 energy, steps, wall time, ledger balance per run; machine, threads, load).
 
     NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_runout_step.py --seeds 6
+    NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_runout_step.py --scene four-slopes --size 1.0 --max-time 2 --seeds 4
 """
 from __future__ import annotations
 
@@ -31,20 +32,21 @@ from bench_sleeping import build, failed_state  # noqa: E402
 from records import record, save  # noqa: E402
 
 
-def runout(start: Path, fraction: float, seed: int, kick: float) -> dict:
+def runout(scene: str, size: float | None, start: Path, fraction: float, seed: int, kick: float,
+           max_time: float | None = None) -> dict:
     from fdem.results.analysis import runout as runout_figures
     from fdem.solve.checkpoint import read_checkpoint
     from fdem.workflow.slope import SlopeWorkflow, runout_stage
     from fdem.workflow.stages import response_time, run_stage
 
-    sim, toe_x = build("demo", None)
+    sim, toe_x = build(scene, size)
     # not load_checkpoint: the failed state was saved at F > 1, whose reduced contact friction
     # the model fingerprint would read as another model
     sim.load_state_dict(read_checkpoint(start)["state"])
     sim.state.v += kick * np.random.default_rng(seed).standard_normal(sim.state.v.shape)
     topo = sim.model.topology
     broken0, step0, n_hist = int(sim.cracks.broken.sum()), sim.state.step, len(sim.history)
-    stage = runout_stage(SlopeWorkflow(runout_dt_fraction=fraction), response_time(sim.model),
+    stage = runout_stage(SlopeWorkflow(runout_dt_fraction=fraction, runout_time=max_time), response_time(sim.model),
                          float(np.ptp(topo.x0[:, 1])), float(np.linalg.norm(sim.gravity)))
     load = os.getloadavg()[0]
     wall = time.perf_counter()
@@ -67,13 +69,16 @@ def main(argv=None) -> dict:
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--kick", type=float, default=1e-3, help="nudge [m/s] (default 1e-3)")
     parser.add_argument("--fractions", type=float, nargs="+", default=[0.4, 0.8])
+    parser.add_argument("--scene", choices=("demo", "four-slopes"), default="demo")
+    parser.add_argument("--size", type=float, default=None, help="element size [m] (default: the scene's)")
+    parser.add_argument("--max-time", type=float, default=None, help="cap on the runout [s] (default the stage's)")
     args = parser.parse_args(argv)
     threads = int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1))
-    start, meta = failed_state("demo", None)
+    start, meta = failed_state(args.scene, args.size)
     runs = []
     for seed in range(args.seeds):  # interleaved, so that a change of load falls on both
         for f in args.fractions:
-            r = runout(start, f, seed, args.kick)
+            r = runout(args.scene, args.size, start, f, seed, args.kick, args.max_time)
             runs.append(r)
             print(f"dt_fraction {f}: seed {seed}: {r['runout_distance_m']:.2f} m, {r['broken_in_runout']} broken, "
                   f"{r['steps']} steps, {r['wall_s']:.0f} s ({r['reason']})", flush=True)
@@ -90,9 +95,10 @@ def main(argv=None) -> dict:
         summary["difference_over_standard_error"] = (b["mean"] - a["mean"]) / se
         print(f"difference of the means {b['mean'] - a['mean']:+.2f} m = "
               f"{summary['difference_over_standard_error']:.2f} standard errors")
-    records = [record(f"demo runout at dt_fraction {f}: mean distance", s["mean"], "m", runs[0]["n_triangles"],
+    records = [record(f"{args.scene} runout at dt_fraction {f}: mean distance", s["mean"], "m", runs[0]["n_triangles"],
                       threads) for f, s in summary.items() if isinstance(s, dict)]
-    save("runout_step", records, runs=runs, summary={str(k): v for k, v in summary.items()}, threads=threads,
+    label = "runout_step" if args.scene == "demo" else f"runout_step_{args.scene}_{args.size}"
+    save(label, records, scene=args.scene, size=args.size, max_time=args.max_time, runs=runs, summary={str(k): v for k, v in summary.items()}, threads=threads,
          kick_m_s=args.kick, **meta)
     return summary
 
