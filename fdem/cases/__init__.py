@@ -20,6 +20,7 @@ CASES = {
     "newmark-block": "fdem.cases.newmark_block",
     "ensemble": "fdem.cases.ensemble",
     "rigid-blocks": "fdem.cases.rigid_blocks",
+    "seismic-slope": "fdem.cases.seismic_slope",
 }
 """Case name (as ``fdem run`` takes it) -> module."""
 
