@@ -31,7 +31,8 @@ from typing import NamedTuple
 from numba import njit, prange
 from fdem.kernels.triangles import (FASTMATH, TC_B00, TC_B01, TC_B10, TC_B11, TC_INV_MASS, TC_LAM, TC_MASS, TC_MU, TC_S0XX, TC_S0XY, TC_S0YY, corner_forces, svk_piola, triangle_response, velocity_gradient_power)
 
-__all__ = ["StepSums", "LEDGER_FIELDS", "damped_velocity", "constrain_and_move", "advance_node", "BLOCK", "n_blocks",
+__all__ = ["StepSums", "LEDGER_FIELDS", "damped_velocity", "constrain_and_move", "advance_node", "BLOCK", "block_span",
+           "n_blocks",
            "step_exploded", "advance_node_elastic", "step_exploded_elastic", "triangle_pass", "viscous_power",
            "node_pass"]
 
@@ -186,6 +187,16 @@ BLOCK = 1024
 and writes them once, which is much faster than one parallel reduction per sum."""
 
 
+@njit(cache=True, inline="always")
+def block_span(blk, n_tri, ranges):
+    """Triangles ``[t_lo, t_hi)`` of block ``blk`` of a step kernel: the ``blk``-th run of
+    :data:`BLOCK` triangles, or row ``blk`` of ``ranges`` (the awake runs of a sleeping
+    scene, :mod:`fdem.solve.sleeping`) when given."""
+    if ranges is None:
+        return blk * BLOCK, min(n_tri, (blk + 1) * BLOCK)
+    return ranges[blk, 0], ranges[blk, 1]
+
+
 def n_blocks(n: int) -> int:
     """Number of work items of :data:`BLOCK` entries covering ``n`` entries."""
     return max(1, -(-n // BLOCK))
@@ -228,12 +239,7 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
         i_e = 0.0
         i_l = 0.0
         n_bad = 0
-        if ranges is None:
-            t_lo = blk * BLOCK
-            t_hi = min(n_tri, (blk + 1) * BLOCK)
-        else:
-            t_lo = ranges[blk, 0]
-            t_hi = ranges[blk, 1]
+        t_lo, t_hi = block_span(blk, n_tri, ranges)
         for t in range(t_lo, t_hi):
             i = 3 * t
             r = triangle_response(tc, t, x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1], x[i + 2, 0], x[i + 2, 1],
@@ -334,12 +340,7 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
         d_l = 0.0
         kin = 0.0
         n_bad = 0
-        if ranges is None:
-            t_lo = blk * BLOCK
-            t_hi = min(n_tri, (blk + 1) * BLOCK)
-        else:
-            t_lo = ranges[blk, 0]
-            t_hi = ranges[blk, 1]
+        t_lo, t_hi = block_span(blk, n_tri, ranges)
         for t in range(t_lo, t_hi):
             i = 3 * t
             b00 = tc[t, TC_B00]
