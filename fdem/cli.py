@@ -130,7 +130,13 @@ def main(argv=None) -> int:
     if argv[:1] == ["run"] and len(argv) > 1 and not argv[1].startswith("-"):
         return _run_case(argv[1], argv[2:])
     args = parser.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except BrokenPipeError:  # `fdem list | head`: the reader left; end quietly, as a Unix tool does
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + 13  # SIGPIPE
 
 
 if __name__ == "__main__":
