@@ -212,6 +212,7 @@ def open_run(parser: argparse.ArgumentParser | None, args, name: str) -> None:
         parser.error(f"--out {out} cannot be written: {err.strerror or err}")
     earlier = _read_run_file(out)
     held = earlier or (out / "summary.json").exists() or any(out.glob("*.pvd"))
+    ours = bool(earlier.get("case")) or _summary_case(out) is not None
     if held and not getattr(args, "overwrite", False):
         what = (f"a run of {earlier.get('case')!r} started {earlier.get('started')} (outcome {earlier.get('outcome')})"
                 if earlier else "the outputs of an earlier run")
@@ -219,12 +220,27 @@ def open_run(parser: argparse.ArgumentParser | None, args, name: str) -> None:
                      + (f", --resume {out} to continue it" if earlier.get("outcome") in ("interrupted", "unstable",
                                                                                             "running") else "")
                      + ", or another --out")
+    if held and not ours:
+        # --overwrite deletes files: only in a folder that an fdem run made, never in a user's own
+        parser.error(f"--out {out} holds a summary.json or .pvd series that fdem did not write (no run.json, no "
+                     "case in the summary); --overwrite clears only fdem's own run folders: choose another --out")
     if held:
         for f in out.iterdir():
             if f.is_file() and (f.suffix in OUTPUT_SUFFIXES or f.name.endswith(".tmp.npz")):
                 f.unlink()
     _write_run_file(parser, out, {**record, "started": _now(), "outcome": "running", "fdem_version": _version(),
                                   "pid": os.getpid()})
+
+
+def _summary_case(folder: Path):
+    """The ``case`` of ``folder/summary.json`` (runs written before ``run.json`` existed), or ``None``."""
+    import json
+
+    try:
+        case = json.loads((folder / "summary.json").read_text()).get("case")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return case if isinstance(case, str) else None
 
 
 def _now() -> str:
@@ -423,6 +439,7 @@ def stop_cleanly_on_signals() -> None:
 
     if threading.current_thread() is not threading.main_thread():
         return
+    STOP.__init__()  # a new run in this process: no stop asked, none received, none forced
 
     def interrupt(signum, frame):
         name = signal.Signals(signum).name

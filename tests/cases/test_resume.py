@@ -212,3 +212,28 @@ def test_a_full_disk_ends_with_a_message_a_summary_and_exit_1(tmp_path):
         assert "No space left" in record["ending"] and record["exit_code"] == 1
     finally:
         subprocess.run(["umount", str(small)], capture_output=True)
+
+
+def test_overwrite_clears_only_a_folder_that_fdem_made(tmp_path):
+    """--overwrite deletes files, so a folder with a summary.json that is not a run's is refused."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.json").write_text('{"my": "notes"}')
+    (mine / "field_data.csv").write_text("x,y\n1,2\n")
+    r = fdem("run", "quick-start", *SCENE, "--out", str(mine), "--overwrite", "--max-time", "0.01")
+    assert r.returncode == 2 and "fdem did not write" in r.stderr
+    assert (mine / "field_data.csv").exists() and (mine / "summary.json").exists()
+
+
+def test_a_stop_in_one_run_does_not_leak_into_the_next_in_the_same_process():
+    from fdem.cases.common import stop_cleanly_on_signals
+    from fdem.solve.simulation import STOP
+
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    STOP.received, STOP.forced = "SIGTERM", True
+    try:
+        stop_cleanly_on_signals()
+        assert STOP.received is None and not STOP.forced and STOP.pending is None
+    finally:  # give the test process its own handlers back
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
