@@ -21,6 +21,8 @@ CASES = {
     "ensemble": "fdem.cases.ensemble",
     "rigid-blocks": "fdem.cases.rigid_blocks",
     "seismic-slope": "fdem.cases.seismic_slope",
+    "compression-test": "fdem.cases.compression_test",
+    "direct-shear": "fdem.cases.direct_shear",
 }
 """Case name (as ``fdem run`` takes it) -> module."""
 
