@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 from fdem.io.ensemble_table import finite_number, DESCRIPTION, TABLE, read_table
 
-__all__ = ["wilson_interval", "summarize"]
+__all__ = ["PARAMETER_UNITS", "parameter_label", "wilson_interval", "summarize", "fos_distribution_figure",
+           "sensitivity_figure", "runout_figure"]
 
 
 # ----------------------------------------------------------------------------- what it reports
@@ -114,26 +115,43 @@ def summarize(out, pictures: bool = True, confidence: float = 0.95) -> dict:
     return summary
 
 
-def _plots(out: Path, rows, ok, fos, varied, spearman, summary, run_d, run_v) -> list[str]:
-    import shutil
+PARAMETER_UNITS = {"cohesion": "Pa", "c": "Pa", "tensile_strength": "Pa", "f_t": "Pa", "friction_angle": "deg",
+                   "phi": "deg", "dip": "deg", "dip_scatter": "deg", "trace_length": "m", "spacing": "m",
+                   "size": "m", "height": "m", "joints": "-", "density": "kg/m^3", "young": "Pa", "poisson": "-",
+                   "gravity_factor": "-", "reduction": "-"}
+"""Units of the sampled parameters the scenes name, for the axis labels."""
 
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def parameter_label(name: str) -> str:
+    """``"name [unit]"`` from :data:`PARAMETER_UNITS`, or from a unit suffix of the name
+    (``_m``, ``_pa``, ``_deg``, ``_s``); ``[as sampled]`` when the unit is not known."""
+    unit = PARAMETER_UNITS.get(name)
+    if unit is None:
+        suffix = {"m": "m", "pa": "Pa", "deg": "deg", "s": "s", "kpa": "kPa", "mpa": "MPa"}
+        unit = suffix.get(name.rpartition("_")[2].lower(), "as sampled") if "_" in name else "as sampled"
+    return f"{name} [{unit}]"
 
-    written = []
+
+def _figure(figsize):
+    from fdem.io.pictures import new_figure
+
+    return new_figure(figsize)
+
+
+def fos_distribution_figure(fos: np.ndarray, summary: dict):
+    """Histogram and empirical CDF of the factors of safety, ``F = 1`` and ``P_f`` marked."""
+    fig = _figure((10, 3.8))
+    a1, a2 = fig.subplots(1, 2)
     pf = summary["probability_of_failure"]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
     if fos.size:
         a1.hist(fos, bins=max(5, int(math.sqrt(fos.size)) + 1), color="tab:blue", edgecolor="k")
         xs = np.sort(fos)
         a2.step(xs, np.arange(1, xs.size + 1) / xs.size, where="post", color="tab:blue", label="empirical CDF")
     for ax in (a1, a2):
         ax.axvline(1.0, color="tab:red", lw=1, label="FoS = 1")
-        ax.set_xlabel("factor of safety")
-    a1.set_ylabel("realizations")
-    a2.set_ylabel("P(FoS <= x)")
+        ax.set_xlabel("factor of safety [-]")
+    a1.set_ylabel("realizations [-]")
+    a2.set_ylabel("P(FoS <= x) [-]")
     lo, hi = pf["wilson"]
     a2.set_title(f"P(FoS < 1) = {pf['k']}/{pf['m']} = {pf['pf']:.3f}, "
                  f"{100 * pf['confidence']:.0f} % Wilson [{lo:.3f}, {hi:.3f}]", fontsize=9)
@@ -142,30 +160,48 @@ def _plots(out: Path, rows, ok, fos, varied, spearman, summary, run_d, run_v) ->
                  fontsize=9)
     a2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "fos_distribution.png", dpi=130)
-    plt.close(fig)
+    return fig
+
+
+def sensitivity_figure(ok, fos: np.ndarray, varied, spearman):
+    """The factor of safety against each varied parameter, with Spearman's rho."""
+    fig = _figure((3.2 * len(varied), 3.2))
+    axes = fig.subplots(1, len(varied), squeeze=False)
+    for ax, p in zip(axes[0], varied):
+        ax.plot([r[f"p_{p}"] for r in ok], fos, "o", ms=4)
+        ax.axhline(1.0, color="tab:red", lw=1)
+        ax.set_xlabel(parameter_label(p))
+        ax.set_ylabel("factor of safety [-]")
+        ax.set_title(f"Spearman rho = {spearman[p]['rho']:.2f}", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def runout_figure(run_d: np.ndarray, run_v: np.ndarray):
+    """Histograms of the runout distance and the displaced volume."""
+    fig = _figure((9, 3.4))
+    a1, a2 = fig.subplots(1, 2)
+    a1.hist(run_d, bins=10, edgecolor="k")
+    a1.set_xlabel("runout distance beyond the toe [m]")
+    a2.hist(run_v, bins=10, edgecolor="k")
+    a2.set_xlabel("displaced volume [m$^3$/m]")
+    for ax in (a1, a2):
+        ax.set_ylabel("realizations [-]")
+    fig.tight_layout()
+    return fig
+
+
+def _plots(out: Path, rows, ok, fos, varied, spearman, summary, run_d, run_v) -> list[str]:
+    import shutil
+
+    written = []
+    fos_distribution_figure(fos, summary).savefig(out / "fos_distribution.png", dpi=130)
     written.append("fos_distribution.png")
     if varied:
-        fig, axes = plt.subplots(1, len(varied), figsize=(3.2 * len(varied), 3.2), squeeze=False)
-        for ax, p in zip(axes[0], varied):
-            ax.plot([r[f"p_{p}"] for r in ok], fos, "o", ms=4)
-            ax.axhline(1.0, color="tab:red", lw=1)
-            ax.set_xlabel(p)
-            ax.set_title(f"Spearman rho = {spearman[p]['rho']:.2f}", fontsize=9)
-        axes[0][0].set_ylabel("factor of safety")
-        fig.tight_layout()
-        fig.savefig(out / "sensitivity.png", dpi=130)
-        plt.close(fig)
+        sensitivity_figure(ok, fos, varied, spearman).savefig(out / "sensitivity.png", dpi=130)
         written.append("sensitivity.png")
     if run_d.size:
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.4))
-        a1.hist(run_d, bins=10, edgecolor="k")
-        a1.set_xlabel("runout distance beyond the toe [m]")
-        a2.hist(run_v, bins=10, edgecolor="k")
-        a2.set_xlabel("displaced volume [m^3/m]")
-        fig.tight_layout()
-        fig.savefig(out / "runout_distribution.png", dpi=130)
-        plt.close(fig)
+        runout_figure(run_d, run_v).savefig(out / "runout_distribution.png", dpi=130)
         written.append("runout_distribution.png")
     for key, name in (("least_stable", "least_stable.png"), ("most_stable", "most_stable.png")):
         i = summary[key]

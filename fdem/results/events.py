@@ -32,7 +32,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 import numpy as np
-from fdem.io.pictures import new_figure, save_figure
+from fdem.io.pictures import finish, new_figure
 from scipy.spatial.distance import pdist
 
 __all__ = ["CATALOGUE_DTYPE", "MULIASHI", "MW_CONSTANT", "NO_EVENTS", "EventCatalogue", "seismic_moment",
@@ -352,14 +352,14 @@ def compare_with_reference(magnitudes, reference: dict | None = None) -> dict:
     return out
 
 
-def magnitude_plot(path: str | os.PathLike, magnitudes: np.ndarray, dm: float = 0.1, mc: float | None = None,
+def magnitude_plot(path: str | os.PathLike | None, magnitudes: np.ndarray, dm: float = 0.1, mc: float | None = None,
                    reference: dict | None = None, title: str = "", dpi: int = 130) -> Path:
     """Left: histogram of event moment magnitudes (bins ``dm``), with the normal density of a
     reference catalogue's mean and standard deviation (e.g. :data:`fdem.results.events.MULIASHI`) scaled
     to the count. Right: ``N(>= M)`` on a log axis with the Gutenberg-Richter line
     ``log10 N = a - b M`` fitted by maximum likelihood above ``mc`` (default: maximum
     curvature, :func:`fdem.results.events.max_curvature_mc`).
-    With no events the picture says so."""
+    With no events the picture says so. Returns the path, or the Figure when ``path`` is None."""
     m = np.asarray(magnitudes, float).ravel()
     m = m[np.isfinite(m)]
     fig = new_figure((10.0, 4.2))
@@ -387,12 +387,12 @@ def magnitude_plot(path: str | os.PathLike, magnitudes: np.ndarray, dm: float = 
             ax2.semilogy(s, 10 ** (fit["a"] - fit["b"] * s), color="C3",
                          label=f"b = {fit['b']:.2f} +- {fit['b_error']:.2f} (Mc = {fit['mc']:.2f})")
         ax2.legend(fontsize=8)
-    ax1.set_xlabel("moment magnitude Mw")
-    ax1.set_ylabel("events per bin")
-    ax2.set_xlabel("moment magnitude Mw")
-    ax2.set_ylabel("N(>= Mw)")
+    ax1.set_xlabel("moment magnitude Mw [-]")
+    ax1.set_ylabel("events per bin [-]")
+    ax2.set_xlabel("moment magnitude Mw [-]")
+    ax2.set_ylabel("N(>= Mw) [-]")
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
     fig.suptitle(title or "micro-seismic events")
     fig.tight_layout()
-    return save_figure(fig, path, dpi)
+    return finish(fig, path, dpi)

@@ -9,11 +9,15 @@ value per history row: cracks broken by mode, fragments) and, at the end, writes
 * ``events.csv``: the micro-seismic catalogue (:func:`fdem.results.events.cluster_events`; a
   "no events" line when nothing broke);
 * ``kinetic_energy.png``, ``cracks_by_mode.png``, ``magnitudes.png`` (when there are events),
-  ``fragments.png`` and ``failure.png`` (displacement on the deformed mesh with the broken
-  crack elements by mode, :func:`fdem.io.pictures.failure_frame`).
+  ``fragments.png``, ``failure.png`` (displacement on the deformed mesh over the outline before
+  failure, intact joints thin, broken crack elements by mode, displacement arrows,
+  :func:`fdem.io.pictures.failure_frame`), ``crack_times.png`` (broken elements by time of
+  breakage), ``geostatic_stress.png`` (sigma_yy against the overburden weight ``rho g d`` at the
+  end of the equilibrium stage, or at the start of a run that began from a geostatic start) and
+  ``failure.gif`` (the run's ``.pvd`` frames animated, :mod:`fdem.io.animation`).
 
 The definitions (runout distance as the 99th area percentile of the reach beyond the toe,
-fragments, events) are in ``docs/outputs.md``.
+fragments, events) are in ``docs/outputs.md``; the pictures in ``docs/pictures.md``.
 """
 from __future__ import annotations
 
@@ -21,11 +25,15 @@ from fdem.io.jsonable import jsonable, write_json
 import math
 from pathlib import Path
 import numpy as np
-from fdem.results import analysis, events
-from fdem.io import pictures
+from fdem.results import analysis, events, overburden
+from fdem.io import animation, pictures
 from fdem.solve.simulation import Simulation
 
-__all__ = ["RunReport"]
+__all__ = ["EQUILIBRIUM_STAGES", "RunReport"]
+
+
+EQUILIBRIUM_STAGES = ("equilibrium", "geostatic")
+"""Stage names whose last state is the geostatic state the stress map shows."""
 
 
 class RunReport:
@@ -66,7 +74,23 @@ class RunReport:
         sim.add_monitor("broken_I", lambda s: float(np.count_nonzero(cracks.failure_mode == 1)))
         sim.add_monitor("broken_II", lambda s: float(np.count_nonzero(cracks.failure_mode == 2)))
         sim.add_monitor("broken_mixed", lambda s: float(np.count_nonzero(cracks.failure_mode == 3)))
-        sim.add_monitor("inelastic", lambda s: float(cracks.n_inelastic()))
+        # the state the stress map shows: the start, when it is a geostatic start (an initial
+        # stress), replaced by the last state of an equilibrium stage when the run has one
+        self._geostatic = ((sim.state.copy(), float(np.linalg.norm(sim.gravity)), "start state (geostatic start)")
+                           if np.any(sim.model.initial_stress != 0.0) and sim.state.step == 0 else None)
+        self._latest = None
+
+        def inelastic(s):
+            # a monitor is the report's one view of the run while it runs: this one also keeps
+            # the state of every history row, and the previous row's when that was the last of
+            # an equilibrium stage (the stage column names the row just written)
+            prev = s.history[-1]["stage"] if s.history else None
+            if prev in EQUILIBRIUM_STAGES and self._latest is not None:
+                self._geostatic = self._latest + (f"end of the {prev} stage, t = {self._latest[0].time:.3g} s",)
+            self._latest = (s.state.copy(), float(np.linalg.norm(s.gravity)))
+            return float(cracks.n_inelastic())
+
+        sim.add_monitor("inelastic", inelastic)
         if fragments_every:
             self._frag_cache = (-1, 0)
 
@@ -131,7 +155,18 @@ class RunReport:
             self.pictures(out, cat)
         return summary
 
-    def pictures(self, out: Path, cat=None) -> list[Path]:
+    def geostatic_state(self):
+        """``(state, g [m/s^2], label)`` of the geostatic state the run went through, or None:
+        the last state of its equilibrium stage, else its start when that was a geostatic start."""
+        hist = self.sim.history
+        if hist and hist[-1]["stage"] in EQUILIBRIUM_STAGES and self._latest is not None:
+            st = self._latest[0]  # the run ended in its equilibrium stage
+            return self._latest + (f"end of the {hist[-1]['stage']} stage, t = {st.time:.3g} s",)
+        return self._geostatic
+
+    def pictures(self, out: Path, cat=None, animate: bool = True) -> list[Path]:
+        """Write the PNG pictures (and, ``animate`` with frames on disk, ``failure.gif``) into
+        ``out``; returns their paths."""
         sim, topo, cracks = self.sim, self.sim.model.topology, self.cracks
         written = []
         t, kin = analysis.history_columns(sim.history, "time", "kinetic_peak")
@@ -151,9 +186,40 @@ class RunReport:
                         if sim.history and "fragments" in sim.history[0] else (None, None))
             written.append(pictures.fragment_size_plot(out / "fragments.png", frag["areas"], time=t_f, count=n_f,
                                                        stage=stage if t.size else None))
+        outline = pictures.boundary_segments(topo.x0, topo.boundary_edges)
+        joint = topo.crack_tag > 0
         g = sim.crack_geometry()
-        disp = np.linalg.norm(sim.state.x - sim.x0, axis=1)
-        written.append(pictures.failure_frame(out / "failure.png", sim.state.x, topo.triangles, disp, g["points"],
-                                              cracks.broken, cracks.failure_mode,
-                                              title=f"t = {sim.state.time:.3g} s: displacement and broken crack elements"))
+        disp = sim.state.x - sim.x0
+        written.append(pictures.failure_frame(out / "failure.png", sim.state.x, topo.triangles,
+                                              np.linalg.norm(disp, axis=1), g["points"], cracks.broken,
+                                              cracks.failure_mode, outline=outline, joint=joint, vectors=disp,
+                                              title=f"t = {sim.state.time:.3g} s: displacement and crack elements"))
+        if len(ev):
+            written.append(pictures.crack_time_map(out / "crack_times.png", topo.x0, topo.triangles,
+                                                   topo.x0[topo.crack_nodes[:, :2]],
+                                                   ev["element"], ev["time"], outline=outline,
+                                                   title=f"{len(np.unique(ev['element']))} crack elements by time "
+                                                         "of breakage (reference positions)"))
+        geo = self.geostatic_state()
+        if geo is not None:
+            st, gravity, label = geo
+            if gravity > 0:
+                centroids = topo.x0[topo.triangles].mean(axis=1)
+                depth = overburden.depth_below_surface(centroids, outline)
+                syy = sim.stresses(st)["yy"]
+                # the top row of triangles sits a third of its height below the surface: no
+                # meaningful ratio there
+                h = np.sqrt(2.0 * np.median(topo.triangle_area0))
+                ratio = overburden.lithostatic_ratio(syy, sim.model.property_array("density"), gravity, depth,
+                                                     min_depth=h)
+                written.append(pictures.geostatic_stress_map(out / "geostatic_stress.png", st.x, topo.triangles,
+                                                             syy, ratio, outline=outline,
+                                                             title=f"geostatic state ({label})"))
+        if animate and sim.out_dir is not None:
+            pvd = sim.out_dir / f"{sim.name}.pvd"
+            crack_pvd = sim.out_dir / f"{sim.name}_cracks.pvd"
+            if pvd.exists():
+                written.append(animation.animate_series(out / "failure.gif", pvd,
+                                                        crack_pvd if crack_pvd.exists() else None, events=ev,
+                                                        outline=outline, joint=joint, title="displacement"))
         return written
