@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import lzma
 import os
+import re
 import zlib
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 import numpy as np
 
-__all__ = ["VTK_LINE", "VTK_TRIANGLE", "COMPRESSORS", "BLOCK_SIZE", "write_vtu", "PvdSeries", "read_pvd"]
+__all__ = ["VTK_LINE", "VTK_TRIANGLE", "COMPRESSORS", "BLOCK_SIZE", "PRECISIONS", "write_vtu", "PvdSeries",
+           "read_pvd"]
 
 
 VTK_LINE = 3
@@ -36,13 +38,29 @@ _VTK_TYPE = {
 }
 
 
-def _as_vtk_array(a) -> np.ndarray:
+PRECISIONS = (None, "float32", "float64")
+"""``precision`` values of :func:`write_vtu`: None writes floating arrays as given; ``"float32"``
+or ``"float64"`` writes the points and every floating array in that type."""
+
+
+def _as_vtk_array(a, precision: str | None = None) -> np.ndarray:
     a = np.asarray(a)
     if a.dtype == np.bool_:
         a = a.astype(np.uint8)
     if a.dtype not in _VTK_TYPE:
         a = a.astype(np.float64)
+    if precision is not None and a.dtype.kind == "f":
+        a = a.astype(precision, copy=False)
     return np.ascontiguousarray(a)
+
+
+def _index_array(a: np.ndarray) -> np.ndarray:
+    """Connectivity and offsets as Int32 when every value fits (half the bytes of Int64; VTK's
+    XML readers, meshio and pyvista read either), else Int64."""
+    a = np.asarray(a, dtype=np.int64)
+    if a.size == 0 or (a.min() >= 0 and a.max() < 2 ** 31):
+        return a.astype(np.int32)
+    return a
 
 
 COMPRESSORS = {"zlib": "vtkZLibDataCompressor", "lzma": "vtkLZMADataCompressor"}
@@ -103,11 +121,20 @@ def _select(data: dict | None, fields) -> dict:
 
 def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, cell_type: int = VTK_TRIANGLE,
               point_data: dict | None = None, cell_data: dict | None = None, compression: str | None = None,
-              level: int = 1, fields=None) -> Path:
+              level: int = 1, fields=None, precision: str | None = None) -> Path:
     """Write one unstructured grid of a single cell type to ``path`` (VTK XML, appended binary).
 
     ``points`` (n, 2) or (n, 3) [m]; ``cells`` (m, k) node ids; data arrays (n,) / (m,) scalars
-    or (n, c) / (m, c) vectors (2-vectors are padded to 3 so ParaView can warp by them).
+    or (n, c) / (m, c) vectors and tensors. 2-vectors are padded to 3 components: VTK takes a
+    vector attribute only with 3 (``vtkDataSetAttributes::SetVectors`` refuses 2), and
+    ``vtkWarpVector`` (ParaView's Warp By Vector) reads 3 values per tuple whatever the array
+    holds, so a 2-component displacement warps by garbage. Symmetric tensors go as 6 components
+    ``[xx, yy, zz, xy, yz, xz]`` (VTK's order; ``vtkTensorGlyph`` draws the same glyph as from
+    the full 9). Connectivity and offsets are Int32 when they fit.
+
+    ``precision``: None writes floating arrays as given (float64 stays float64: the default, exact
+    round trips); ``"float32"`` writes the points and every floating array as Float32 (half the
+    bytes, 7 significant digits: enough to look at, never to restart from).
 
     ``compression``: None (raw, the default: fastest to write and to read, see
     ``docs/outputs.md``), ``"zlib"`` (``vtkZLibDataCompressor``) or ``"lzma"``
@@ -121,6 +148,8 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
     """
     if compression is not None and compression not in COMPRESSORS:
         raise ValueError(f"compression must be None or one of {sorted(COMPRESSORS)}, got {compression!r}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
     if fields is not None:
         fields = {fields} if isinstance(fields, str) else set(fields)
         known = set(point_data or {}) | set(cell_data or {})
@@ -134,26 +163,19 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
     if pts.shape[1] == 2:
         pts = np.column_stack([pts, np.zeros(len(pts))])
     cells = np.asarray(cells, dtype=np.int64)
+    if cells.ndim != 2:
+        cells = cells.reshape(-1, 2 if cell_type == VTK_LINE else 3)
     n_cells, k = cells.shape if cells.size else (0, 2 if cell_type == VTK_LINE else 3)
     blocks: list[bytes] = []
-    offset = 0
 
-    def add(arr: np.ndarray) -> int:
-        nonlocal offset
-        block = _compressed_block(arr.tobytes(), compression, level)
-        blocks.append(block)
-        start = offset
-        offset += len(block)
-        return start
-
-    def data_array(name: str, arr) -> str:
-        arr = _as_vtk_array(arr)
+    def data_array(name: str, arr, index: bool = False) -> str:
+        arr = _index_array(arr) if index else _as_vtk_array(arr, precision)
         if arr.ndim == 2 and arr.shape[1] == 2:
             arr = np.column_stack([arr, np.zeros(len(arr), arr.dtype)])
         comps = "" if arr.ndim == 1 else f'NumberOfComponents="{arr.shape[1]}" '
-        start = add(arr)
+        blocks.append(_compressed_block(arr.tobytes(), compression, level))
         return (f'<DataArray type="{_VTK_TYPE[arr.dtype]}" Name={quoteattr(name)} '
-                f'{comps}format="appended" offset="{start}"/>')
+                f'{comps}format="appended" offset="\x00{len(blocks) - 1}\x00"/>')
 
     compressor = f' compressor="{COMPRESSORS[compression]}"' if compression else ""
     xml = ['<?xml version="1.0"?>',
@@ -170,17 +192,27 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
     xml.append("</CellData><Points>")
     xml.append(data_array("Points", pts))
     xml.append("</Points><Cells>")
-    xml.append(data_array("connectivity", cells.ravel()))
-    xml.append(data_array("offsets", np.arange(1, n_cells + 1, dtype=np.int64) * k))
+    xml.append(data_array("connectivity", cells.ravel(), index=True))
+    xml.append(data_array("offsets", np.arange(1, n_cells + 1, dtype=np.int64) * k, index=True))
     xml.append(data_array("types", np.full(n_cells, cell_type, dtype=np.uint8)))
     xml.append("</Cells></Piece></UnstructuredGrid>")
     xml.append('<AppendedData encoding="raw">')
-    head = "\n".join(xml).encode() + b"\n_"
+    # The blocks go into the appended section in the reverse order of their tags (offsets may
+    # come in any order). meshio reads the blocks in file order, finding each tag by its offset
+    # and rewriting it to an offset of its own base64 text; in tag order a rewritten tag whose
+    # new offset equals a later block's raw offset is found first, and the file reads wrong or
+    # not at all (it happened to a 24-triangle frame: two 1,736-byte arrays, base64 length 4,632,
+    # the next block's offset). In reverse order every tag not yet read comes before the
+    # rewritten ones.
+    offsets, at = [0] * len(blocks), 0
+    for i in reversed(range(len(blocks))):
+        offsets[i], at = at, at + len(blocks[i])
+    head = re.sub("\x00([0-9]+)\x00", lambda m: str(offsets[int(m.group(1))]), "\n".join(xml)).encode() + b"\n_"
     tail = b"\n</AppendedData>\n</VTKFile>\n"
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as fh:
         fh.write(head)
-        for b in blocks:
+        for b in reversed(blocks):
             fh.write(b)
         fh.write(tail)
     return path
@@ -189,14 +221,17 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
 class PvdSeries:
     """A ParaView time series ``<directory>/<name>.pvd`` of ``<name>_<frame>.vtu`` files.
 
-    ``compression``, ``level`` and ``fields`` are passed to :func:`write_vtu` for every frame.
+    ``compression``, ``level``, ``fields`` and ``precision`` are passed to :func:`write_vtu` for
+    every frame.
     """
 
     def __init__(self, directory: str | os.PathLike, name: str, compression: str | None = None,
-                 level: int = 1, fields=None):
+                 level: int = 1, fields=None, precision: str | None = None):
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
         self.directory = Path(directory)
         self.name = name
-        self.compression, self.level, self.fields = compression, level, fields
+        self.compression, self.level, self.fields, self.precision = compression, level, fields, precision
         self.frames: list[tuple[float, str]] = []
         self.directory.mkdir(parents=True, exist_ok=True)
 
@@ -209,7 +244,8 @@ class PvdSeries:
         """Write one frame at ``time`` [s] and rewrite the ``.pvd`` collection."""
         filename = filename or f"{self.name}_{len(self.frames):05d}.vtu"
         path = write_vtu(self.directory / filename, points, cells, cell_type, point_data, cell_data,
-                         compression=self.compression, level=self.level, fields=self.fields)
+                         compression=self.compression, level=self.level, fields=self.fields,
+                         precision=self.precision)
         self.frames.append((float(time), filename))
         self._write_pvd()
         return path

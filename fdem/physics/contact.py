@@ -643,6 +643,25 @@ class ContactSet:
         self._w_tangential += w_f
         self._w_damping += w_d
 
+    def pair_forces(self) -> dict[str, np.ndarray]:
+        """Forces of the touching pairs at the last :meth:`add_forces`, for output (force chains).
+
+        ``pairs`` (k, 2) triangle ids ``(i, j)``; ``force`` (k, 2) total force on ``i`` [N/m]
+        (``j`` gets minus it: the pair law is equal and opposite); ``normal`` (k,) and ``shear``
+        (k,) its magnitudes [N/m]: the shear part is the pair's tangential (friction) spring
+        force, kept with the pair's history, the normal part the rest (penalty push plus normal
+        damping). The force on ``i`` is minus the sum of the stored forces on ``j``'s corners.
+        Empty arrays when nothing touches (no work then)."""
+        touching = np.flatnonzero(self._touching) if len(self.pairs) else np.zeros(0, np.int64)
+        if touching.size == 0:
+            z = np.zeros(0)
+            return {"pairs": np.zeros((0, 2), np.int64), "force": np.zeros((0, 2)), "normal": z, "shear": z.copy()}
+        ft = self._f_target[touching]
+        force = -np.column_stack([ft[:, 0] + ft[:, 2] + ft[:, 4], ft[:, 1] + ft[:, 3] + ft[:, 5]])
+        tangential = self._history[touching, 0:2]
+        return {"pairs": self.pairs[touching].copy(), "force": force,
+                "normal": np.linalg.norm(force - tangential, axis=1), "shear": np.linalg.norm(tangential, axis=1)}
+
     def energy_terms(self) -> dict[str, float]:
         """Energy ledger [J/m] after the last :meth:`add_forces`.
 

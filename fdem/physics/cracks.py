@@ -32,6 +32,7 @@ from typing import Collection, Mapping, Sequence
 import numpy as np
 from fdem.physics.interfaces import Interfaces
 from fdem.kernels import cracks as K
+from fdem.kernels.crack_output import crack_tractions
 from fdem.mesh.topology import INTACT, Topology
 from fdem.physics.crack_properties import CrackProperties, ELASTIC_ONLY_LIMIT, SOFTENING_KINDS, softening_integral, softening_max_slope
 from fdem.physics.heterogeneity import Heterogeneity
@@ -601,17 +602,55 @@ class CrackSet:
         """(n, 3) energy dissipated by each element [J/m]: mode I, cohesive mode II, friction."""
         return self._diss[self._inv]
 
-    def crack_fields(self) -> dict[str, np.ndarray]:
+    def tractions(self, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(normal, shear)``, (n,) each [Pa], topology order: the tractions the elements carry
+        at positions ``x`` (default: those of the last :meth:`add_forces`, the simulation's
+        current ones), mean of the two ends.
+
+        Evaluated by the step's own law (:func:`fdem.kernels.cracks.point_law`, through
+        :func:`fdem.kernels.crack_output.crack_tractions`) on each element's stored state, which
+        is read and not changed; the law's end forces carry the end weight ``w = L0/2``, so the
+        traction of an end is its force divided by ``w``. Normal: tension positive, compression
+        negative (a geostatic preload included: the law adds the offsets); shear: the traction
+        resisting the slip. Broken elements carry none: 0."""
+        if x is None:
+            x = self._x_last if self._x_last is not None else self.topology.x0
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        ends = np.empty((self.n_cracks, 4))
+        broken = np.ascontiguousarray(self.broken[self._perm])
+        crack_tractions(x, self._nodes, self._const, self._status, self._state, self._offset, self._dil, broken, ends)
+        w = 0.5 * self.length0[self._perm]
+        normal = np.empty(self.n_cracks)
+        shear = np.empty(self.n_cracks)
+        normal[self._perm] = 0.5 * (ends[:, 0] + ends[:, 2]) / w
+        shear[self._perm] = 0.5 * (ends[:, 1] + ends[:, 3]) / w
+        return normal, shear
+
+    def break_time(self) -> np.ndarray:
+        """(n,) time [s] at which each element broke (from :attr:`events`); NaN while intact."""
+        t = np.full(self.n_cracks, np.nan)
+        ev = self.events
+        if ev.size:
+            t[ev["element"]] = ev["time"]
+        return t
+
+    def crack_fields(self, x: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """(n,) arrays for the crack line cells of the output: ``damage``, ``broken`` (0/1),
         ``failure_mode`` (0 intact, 1 mode I, 2 mode II, 3 mixed), ``fracture_energy`` (mode I +
-        II dissipated per element [J/m]), ``strength_multiplier``."""
+        II dissipated per element [J/m]), ``strength_multiplier``, ``normal_traction`` and
+        ``shear_traction`` [Pa] (:meth:`tractions` at positions ``x``, default the last
+        :meth:`add_forces`), ``break_time`` [s] (:meth:`break_time`, NaN while intact)."""
         d = self.dissipated
+        normal, shear = self.tractions(x)
         return {
             "damage": self.damage,
             "broken": self.broken.astype(np.int8),
             "failure_mode": self.failure_mode,
             "fracture_energy": d[:, K.CW_MODE_I] + d[:, K.CW_MODE_II],
             "strength_multiplier": self.strength_multiplier,
+            "normal_traction": normal,
+            "shear_traction": shear,
+            "break_time": self.break_time(),
         }
 
     def energy_terms(self) -> dict[str, float]:

@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
 import numpy as np
 from fdem.kernels.stepping import (LEDGER_FIELDS, StepSums, n_blocks, node_pass, step_exploded, step_exploded_elastic, triangle_pass, viscous_power)
-from fdem.kernels.triangles import assemble_triangle_forces, triangle_stress_state
+from fdem.kernels.triangles import assemble_triangle_forces, deformation_gradients, triangle_stress_state
 from fdem.physics.elastic import PLANE_STRAIN
 from fdem.physics.stability import combine_stable_dt
 from fdem.physics.contact import ContactSet
@@ -65,7 +65,7 @@ from fdem.solve.sleeping import SleepPolicy, Sleeping
 from fdem.solve.ledger import EnergyLedger, work_halves
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation", "StopRequest",
-           "STOP"]
+           "STOP", "MONITOR_QUANTITIES", "PointMonitor"]
 
 
 class StopRequest:
@@ -174,6 +174,69 @@ def provider_crack_fields(provider, n_cracks: int) -> dict[str, np.ndarray]:
     return found
 
 
+MONITOR_QUANTITIES = ("ux", "uy", "vx", "vy", "sxx", "syy", "sxy")
+"""What a point monitor records, in this order: displacement [m], velocity [m/s], Cauchy stress [Pa]."""
+
+
+class PointMonitor:
+    """A material point watched through the triangle that contains it in the reference
+    configuration: ``triangle`` (id) and ``weights`` (3,), the point's barycentric coordinates
+    ``lambda_k`` in it, so that any nodal field ``u`` reads ``u(p) = sum_k lambda_k u_k``
+    (exact for the linear displacement of a constant-strain triangle)."""
+
+    def __init__(self, name: str, x: float, y: float, triangle: int, weights: np.ndarray):
+        self.name, self.x, self.y = name, float(x), float(y)
+        self.triangle = int(triangle)
+        self.weights = np.asarray(weights, dtype=np.float64)
+        self.columns = tuple(f"{name}_{q}" for q in MONITOR_QUANTITIES)
+        self._key = None
+        self._values = None
+
+    @classmethod
+    def locate(cls, name: str, x: float, y: float, x0: np.ndarray, triangles: np.ndarray) -> "PointMonitor":
+        """The monitor of the point ``(x, y)`` [m]: the triangle whose smallest barycentric
+        coordinate of the point is the largest (inside: all >= 0; on a shared edge either side
+        gives the same displacement). Outside every triangle (by more than 1e-9 of a triangle's
+        size, round-off on the boundary) is a ``ValueError`` naming the point."""
+        if not (math.isfinite(float(x)) and math.isfinite(float(y))):
+            raise ValueError(f"point monitor {name!r}: the point ({x}, {y}) is not finite")
+        p = x0[triangles]  # (n, 3, 2)
+        a, b, c = p[:, 0], p[:, 1], p[:, 2]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+        l1 = ((x - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (y - a[:, 1])) / det
+        l2 = ((b[:, 0] - a[:, 0]) * (y - a[:, 1]) - (x - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
+        lam = np.column_stack([1.0 - l1 - l2, l1, l2])
+        worst = lam.min(axis=1)
+        t = int(np.argmax(worst))
+        if worst[t] < -1e-9:
+            lo, hi = x0.min(axis=0), x0.max(axis=0)
+            raise ValueError(
+                f"point monitor {name!r}: the point ({float(x):.6g}, {float(y):.6g}) m lies outside the mesh "
+                f"(reference configuration; the mesh spans x {lo[0]:.6g} to {hi[0]:.6g} m, y {lo[1]:.6g} to "
+                f"{hi[1]:.6g} m, and no triangle contains the point)")
+        return cls(name, x, y, t, np.clip(lam[t], 0.0, 1.0) / np.clip(lam[t], 0.0, 1.0).sum())
+
+    def values(self, sim: "Simulation") -> tuple[float, ...]:
+        """``(ux, uy, vx, vy, sxx, syy, sxy)`` of the point in ``sim``'s current state, computed once
+        per history row (the columns of one row share it)."""
+        st = sim.state
+        key = (st.step, st.time)
+        if key != self._key:
+            nodes = sim.triangles[self.triangle]
+            u = self.weights @ (st.x[nodes] - sim.x0[nodes])
+            v = self.weights @ st.v[nodes]
+            s = np.empty((1, 6))
+            t = self.triangle
+            triangle_stress_state(st.x, st.v, sim.triangles[t:t + 1], sim.tc[t:t + 1], s)
+            self._values = (float(u[0]), float(u[1]), float(v[0]), float(v[1]),
+                            float(s[0, 0]), float(s[0, 1]), float(s[0, 2]))
+            self._key = key
+        return self._values
+
+    def state_dict(self) -> dict:
+        return {"name": self.name, "x": self.x, "y": self.y}
+
+
 class Simulation:
     """An explicit FDEM simulation of a :class:`~fdem.solve.model.Model`, run in stages.
 
@@ -187,8 +250,8 @@ class Simulation:
         Fraction of the critical step used when ``dt`` is automatic (default 0.8): the
         time-step factor, not to be read as a factor of safety.
     out_dir : path, optional
-        Where ``<name>.pvd``, ``<name>_cracks.pvd``, ``history.csv``, pictures and state files
-        go; ``None`` writes nothing.
+        Where ``<name>.pvd``, ``<name>_cracks.pvd``, ``<name>_contacts.pvd`` (with a contact
+        set), ``history.csv``, pictures and state files go; ``None`` writes nothing.
     name : str
         Base name of the output series.
     progress : bool
@@ -198,14 +261,17 @@ class Simulation:
         the broken crack elements by failure mode (:func:`fdem.io.pictures.failure_frame`).
     providers : sequence of force providers (see the module docstring).
     output_fields : sequence of str, optional
-        Point/cell arrays written to the triangle frames (default all: ``displacement``,
-        ``velocity``, the stresses, ``property``, ``body``); fewer fields, smaller frames.
+        Point/cell arrays written to the triangle frames (default all of :meth:`fields`:
+        ``displacement``, ``velocity``, the stress tensor, principal stresses and directions,
+        von Mises stress, strain, ``property``, ``body``); fewer fields, smaller frames.
     time_cap : float, optional
         A cap [s] on the simulated time of every later :meth:`run` (a smoke run: a case's
         ``--max-time``); a run asked to go beyond it stops at it, and :attr:`time_capped` says so.
-    compression : ``None`` (raw, default: fastest to write), ``"zlib"`` or ``"lzma"``
-        Block compression of every VTU frame (``docs/outputs.md``: zlib keeps 62 % of the bytes
-        of a 180k-triangle frame at about 13 times the write time).
+    compression : ``"zlib"`` (default), ``None`` (raw) or ``"lzma"``
+        Block compression of every VTU frame (sizes and times in ``docs/outputs.md``).
+    output_precision : ``"float32"`` (default) or ``"float64"``
+        Floating type of the frames' points and fields: float32 halves them and keeps 7
+        significant digits, enough to look at; checkpoints keep float64 whatever this says.
     density_scaling : float or None
         Added-mass budget of density-scaled quasi-static stages, a fraction of the model's mass
         (default 0.01, :mod:`fdem.solve.density_scaling`); ``None`` or 0 keeps the real masses
@@ -219,9 +285,9 @@ class Simulation:
 
     def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
-                 output_fields=None, compression: str | None = None, time_cap: float | None = None,
+                 output_fields=None, compression: str | None = "zlib", time_cap: float | None = None,
                  density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET,
-                 sleeping: bool | SleepPolicy | None = None):
+                 sleeping: bool | SleepPolicy | None = None, output_precision: str = "float32"):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         if density_scaling is not None and not (math.isfinite(density_scaling) and 0.0 <= density_scaling <= 1.0):
@@ -244,6 +310,7 @@ class Simulation:
         self.cracks: CrackSet | None = None  # the crack-element set among the providers, if any
         self.contact: ContactSet | None = None  # the contact set among the providers, if any
         self.monitors: dict[str, Callable[["Simulation"], float]] = {}
+        self.point_monitors: dict[str, PointMonitor] = {}
         topo = model.topology
         self.x0 = np.ascontiguousarray(topo.x0, dtype=np.float64)
         self.triangles = np.ascontiguousarray(topo.triangles, dtype=np.int64)
@@ -275,11 +342,17 @@ class Simulation:
         self._history_writer = history_file.HistoryWriter(self.out_dir / "history.csv") if self.out_dir else None
         if compression not in (None, "zlib", "lzma"):
             raise ValueError(f"compression must be None, 'zlib' or 'lzma', got {compression!r}")
+        if output_precision not in ("float32", "float64"):
+            raise ValueError(f"output_precision must be 'float32' or 'float64', got {output_precision!r}")
+        self.compression, self.output_precision = compression, output_precision
         self._series = (out.PvdSeries(self.out_dir, name, compression=compression,
-                                      fields=None if output_fields is None else list(output_fields))
+                                      fields=None if output_fields is None else list(output_fields),
+                                      precision=output_precision)
                         if self.out_dir else None)
-        self._crack_series = (out.PvdSeries(self.out_dir, f"{name}_cracks", compression=compression)
+        self._crack_series = (out.PvdSeries(self.out_dir, f"{name}_cracks", compression=compression,
+                                            precision=output_precision)
                               if self.out_dir and topo.n_cracks > 0 else None)
+        self._contact_series: out.PvdSeries | None = None  # made at the first frame with a contact set
         self._frames = 0
         self._stage = ""
         self._good = self.state.copy()
@@ -317,6 +390,35 @@ class Simulation:
     def add_monitor(self, name: str, fn: Callable[["Simulation"], float]) -> None:
         """Record ``fn(sim)`` as column ``name`` of every history row."""
         self.monitors[name] = fn
+
+    def add_point_monitor(self, name: str, x: float, y: float) -> "PointMonitor":
+        """Watch the material point at ``(x, y)`` [m] of the reference configuration.
+
+        Every history row (``history.csv``) gets the columns ``<name>_ux``, ``<name>_uy`` [m]
+        (displacement), ``<name>_vx``, ``<name>_vy`` [m/s] (velocity) and ``<name>_sxx``,
+        ``<name>_syy``, ``<name>_sxy`` [Pa] (Cauchy stress, compression negative) of the point,
+        displacement and velocity interpolated linearly over the triangle that contains it
+        (its barycentric weights), stress that triangle's (constant-strain). The monitor is
+        saved with a checkpoint and restored with it (:meth:`state_dict`). A point outside the
+        mesh, a name already used or a monitor added after the first history row (its columns
+        would be missing from the header) is refused with a ``ValueError``.
+        """
+        if not isinstance(name, str) or not name.strip():
+            raise ValueError(f"point monitor name must be a non-empty string, got {name!r}")
+        if name in self.point_monitors:
+            raise ValueError(f"a point monitor named {name!r} already exists (at "
+                             f"({self.point_monitors[name].x:.6g}, {self.point_monitors[name].y:.6g}) m)")
+        if self.history:
+            raise ValueError(f"point monitor {name!r}: add point monitors before the first history row (this run "
+                             f"has {len(self.history)} rows; history.csv's header is fixed by its first row)")
+        mon = PointMonitor.locate(name, x, y, self.x0, self.triangles)
+        taken = [c for c in mon.columns if c in self.monitors]
+        if taken:
+            raise ValueError(f"point monitor {name!r}: history column(s) {taken} are already monitors")
+        self.point_monitors[name] = mon
+        for column, k in zip(mon.columns, range(len(MONITOR_QUANTITIES))):
+            self.monitors[column] = (lambda s, m=mon, k=k: m.values(s)[k])
+        return mon
 
     def critical_dt(self) -> tuple[float, dict[str, float]]:
         """The critical (stability limit) step [s] and the limits it combines, by source (while
@@ -738,7 +840,10 @@ class Simulation:
             return
         from fdem.io.vtk import read_pvd
 
-        for series in (self._series, self._crack_series):
+        series_list = [self._series, self._crack_series]
+        if self.contact is not None:
+            series_list.append(self._contacts())
+        for series in series_list:
             if series is not None and series.pvd_path.exists():
                 series.frames = [(t, p.name) for t, p in read_pvd(series.pvd_path)][: self._frames]
         if self._history_writer is not None:
@@ -805,14 +910,51 @@ class Simulation:
         return -f.sum(axis=0)
 
     def fields(self, state: State | None = None) -> dict[str, dict[str, np.ndarray]]:
-        """Point and cell arrays written to the VTU files."""
+        """Point and cell arrays written to the triangle frames (``docs/outputs.md`` lists them).
+
+        Point: ``displacement`` ``x - X`` [m], ``velocity`` [m/s] (2-vectors, written with a zero
+        third component: VTK draws and warps by 3-component vectors only). Cell: ``stress``, the
+        Cauchy stress [Pa] as a symmetric tensor ``[xx, yy, zz, xy, yz, xz]`` (VTK's 6-component
+        order; ``yz = xz = 0`` in plane strain), ``stress_principal_1 >= stress_principal_2``
+        [Pa] (in plane), their unit directions ``stress_direction_1`` ``(cos a, sin a, 0)`` with
+        ``tan 2a = 2 s_xy / (s_xx - s_yy)`` and ``stress_direction_2`` (normal to it),
+        ``stress_von_mises`` [Pa], ``strain``, the Green-Lagrange strain ``(F^T F - I)/2`` [-] as
+        a symmetric tensor (same order, ``zz = 0``: plane strain; the small strain for small
+        rotations), ``property`` and ``body`` (ids)."""
         state = state or self.state
         s = self.stresses(state)
+        n = self.model.n_triangles
+        zero = np.zeros(n)
         point = {"displacement": state.x - self.x0, "velocity": state.v}
-        cell = {f"stress_{k}": s[k] for k in ("xx", "yy", "xy", "zz", "principal_1", "principal_2", "von_mises")}
-        cell["property"] = self.model.triangle_property
-        cell["body"] = np.asarray(self.model.topology.triangle_body, np.int32)
+        angle = 0.5 * np.arctan2(2.0 * s["xy"], s["xx"] - s["yy"])
+        cos, sin = np.cos(angle), np.sin(angle)
+        F = np.empty((n, 4))
+        deformation_gradients(state.x, self.triangles, self.tc, F)
+        exx = 0.5 * (F[:, 0] ** 2 + F[:, 2] ** 2 - 1.0)
+        eyy = 0.5 * (F[:, 1] ** 2 + F[:, 3] ** 2 - 1.0)
+        exy = 0.5 * (F[:, 0] * F[:, 1] + F[:, 2] * F[:, 3])
+        cell = {"stress": np.column_stack([s["xx"], s["yy"], s["zz"], s["xy"], zero, zero]),
+                "stress_principal_1": s["principal_1"], "stress_principal_2": s["principal_2"],
+                "stress_direction_1": np.column_stack([cos, sin, zero]),
+                "stress_direction_2": np.column_stack([-sin, cos, zero]),
+                "stress_von_mises": s["von_mises"],
+                "strain": np.column_stack([exx, eyy, zero, exy, zero, zero]),
+                "property": self.model.triangle_property,
+                "body": np.asarray(self.model.topology.triangle_body, np.int32)}
         return {"point": point, "cell": cell}
+
+    def contact_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:
+        """Line cells of the touching contact pairs, for force chains: ``points`` (2k, 2), the
+        current centroids of the two triangles of each pair [m]; ``normal_force`` and
+        ``shear_force`` (k,) [N/m], magnitudes of the pair's force at the last step
+        (:meth:`fdem.physics.contact.ContactSet.pair_forces`). Empty without a contact set or
+        when nothing touches."""
+        state = state or self.state
+        if self.contact is None:
+            return {"points": np.zeros((0, 2)), "normal_force": np.zeros(0), "shear_force": np.zeros(0)}
+        pf = self.contact.pair_forces()
+        centroid = state.x[self.triangles[pf["pairs"]]].mean(axis=2)  # (k, 2, 2)
+        return {"points": centroid.reshape(-1, 2), "normal_force": pf["normal"], "shear_force": pf["shear"]}
 
     def crack_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:
         """Line-cell points (2 per crack element, midpoints of its coincident node pairs), mean
@@ -845,12 +987,34 @@ class Simulation:
             g = self.crack_geometry()
             cell = {"crack_tag": topo.crack_tag, "opening": g["opening"], "slip": g["slip"]}
             for p in self.providers:
-                cell.update(provider_crack_fields(p, topo.n_cracks))
+                # the crack set's tractions at the frame's positions (a frame written before any
+                # step, or after positions were set by hand, is not at its last add_forces)
+                cell.update(p.crack_fields(self.state.x) if p is self.cracks
+                            else provider_crack_fields(p, topo.n_cracks))
             lines = np.arange(2 * topo.n_cracks, dtype=np.int64).reshape(-1, 2)
             self._crack_series.write(self.state.time, g["points"], lines, out.VTK_LINE, None, cell)
+        if self.contact is not None:
+            self._write_contact_frame()
         if self.pictures:
             self._picture()
         self._frames += 1
+
+    def _contacts(self) -> "out.PvdSeries":
+        """The ``<name>_contacts.pvd`` series (made on first use: the contact set may be
+        registered after the simulation is built)."""
+        if self._contact_series is None:
+            self._contact_series = out.PvdSeries(self.out_dir, f"{self.name}_contacts", compression=self.compression,
+                                                 precision=self.output_precision)
+        return self._contact_series
+
+    def _write_contact_frame(self) -> None:
+        """One frame of contact force lines; with no touching pair a frame of zero cells (a few
+        hundred bytes), so the series keeps one frame per output time."""
+        g = self.contact_geometry()
+        k = len(g["normal_force"])
+        lines = np.arange(2 * k, dtype=np.int64).reshape(-1, 2)
+        self._contacts().write(self.state.time, g["points"], lines, out.VTK_LINE, None,
+                               {"normal_force": g["normal_force"], "shear_force": g["shear_force"]})
 
     def _picture(self) -> None:
         """PNG of the frame: displacement magnitude on the deformed mesh with the broken crack
@@ -916,7 +1080,25 @@ class Simulation:
                      "step": int(self._good.step)},
             "providers": [p.state_dict() for p in self.providers],
             "sleeping": None if self.sleeping is None else self.sleeping.state_dict(),
+            "point_monitors": [m.state_dict() for m in self.point_monitors.values()],
         }
+
+    def _restore_point_monitors(self, saved: list) -> None:
+        """Add the checkpoint's point monitors this simulation lacks (before the history rows,
+        which hold their columns, come back); one of the same name here must watch the same
+        point, else its column would join two points' records."""
+        for m in saved:
+            name, x, y = str(m["name"]), float(m["x"]), float(m["y"])
+            here = self.point_monitors.get(name)
+            if here is None:
+                history, self.history = self.history, []
+                try:
+                    self.add_point_monitor(name, x, y)
+                finally:
+                    self.history = history
+            elif (here.x, here.y) != (x, y):
+                raise ValueError(f"point monitor {name!r} watches ({here.x:.6g}, {here.y:.6g}) m here, the checkpoint's "
+                                 f"watched ({x:.6g}, {y:.6g}) m: rename one of them")
 
     def load_state_dict(self, d: dict) -> None:
         """Restore :meth:`state_dict` output into a simulation of the same model and providers.
@@ -955,6 +1137,7 @@ class Simulation:
         led.mass_change_work = float(s.get("mass_change_work", 0.0))
         led.sleep_dissipation = float(s.get("sleep_dissipation", 0.0))
         self.kinetic_peak = float(d.get("kinetic_peak", 0.0))
+        self._restore_point_monitors(d.get("point_monitors") or [])  # older checkpoints: none
         self.history[:] = [dict(r) for r in d["history"]]
         self._frames = int(d["frames"])
         self._stage = str(d["stage"])
