@@ -89,7 +89,7 @@ def write_gif(path: str | os.PathLike, images, fps: float = 8.0) -> Path:
 
 def animate_series(path: str | os.PathLike, pvd: str | os.PathLike, crack_pvd: str | os.PathLike | None = None,
                    events=None, outline=None, joint=None, max_frames: int = MAX_FRAMES, width_px: int = 800,
-                   fps: float = 8.0, title: str = "") -> Path:
+                   fps: float | None = None, title: str = "") -> Path:
     """Draw the frames of the ``pvd`` series into a GIF at ``path``; returns the path.
 
     Parameters
@@ -102,6 +102,8 @@ def animate_series(path: str | os.PathLike, pvd: str | os.PathLike, crack_pvd: s
     max_frames : frames drawn at most (evenly spread, first and last kept), fewer for a large
         mesh (:data:`MAX_TRIANGLES_DRAWN`)
     width_px : width of the GIF [pixels]; the height follows the deformed extent
+    fps : frames per second (default: the frames drawn over 6 s, between 2 and 12 per second, so
+        a run with few output frames is not over in a blink)
     """
     frames = read_pvd(pvd)
     if not frames:
@@ -155,4 +157,4 @@ def animate_series(path: str | os.PathLike, pvd: str | os.PathLike, crack_pvd: s
         fig.tight_layout()
         fig.canvas.draw()
         images.append(np.asarray(fig.canvas.buffer_rgba()).copy())
-    return write_gif(path, images, fps)
+    return write_gif(path, images, fps if fps is not None else float(np.clip(len(images) / 6.0, 2.0, 12.0)))

@@ -200,14 +200,15 @@ def draw_failure(fig, ax, x, tri, u, segs=None, show=None, mode=None, outline=No
     if vectors is not None:
         c = x[tri].mean(axis=1)
         pick = arrow_sample(c, max_arrows)
-        vec = vectors[pick]
-        size = np.linalg.norm(vec, axis=1)
+        span = np.ptp(c, axis=0)
+        cell = np.sqrt(max(span[0] * span[1], 1e-300) / max(len(pick), 1))
+        size = np.linalg.norm(vectors[pick], axis=1)
         top = float(size.max()) if size.size else 0.0
+        pick = pick[size >= 0.03 * top]  # arrows under 3 % of the longest would be dots on rock at rest
+        vec = vectors[pick]
         if top > 0:
             # arrows scaled so the longest spans about two grid cells: a runout of metres and a
             # creep of millimetres both read; the key gives the true length
-            span = np.ptp(c, axis=0)
-            cell = np.sqrt(max(span[0] * span[1], 1e-300) / max(len(pick), 1))
             q = ax.quiver(c[pick, 0], c[pick, 1], vec[:, 0], vec[:, 1], angles="xy", scale_units="xy",
                           scale=top / (2.0 * cell), width=0.0022, color="k", zorder=6, gid="arrows")
             ax.quiverkey(q, 0.9, 1.02, top, f"{vector_name} {top:.3g} {vector_unit}", labelpos="E",
@@ -249,7 +250,8 @@ def failure_frame(path: str | os.PathLike | None, x: np.ndarray, triangles, disp
         not broken are drawn thin and light (intact rock bridges are not drawn)
     vectors : (n_nodes, 2) or (n_tri, 2) displacement [m] or velocity [m/s] drawn as arrows at
         about ``max_arrows`` evenly spread triangle centroids (:func:`arrow_sample`), scaled so
-        the longest spans two spacings; ``vector_name`` and ``vector_unit`` label the key
+        the longest spans two spacings, those under 3 % of the longest left out (rock at rest);
+        ``vector_name`` and ``vector_unit`` label the key
 
     Flat-shaded triangles go through one ``tripcolor`` (a single PolyCollection) and the cracks
     through one LineCollection per mode, so a 180k-triangle frame renders in seconds
