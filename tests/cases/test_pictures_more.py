@@ -12,7 +12,7 @@ from fdem.io.pictures import (arrow_sample, boundary_segments, crack_count_plot,
                               fragment_size_plot, geostatic_stress_map, group_label, group_stages, kinetic_energy_plot,
                               stage_label_rows,
                               stage_spans)
-from fdem.io.vtk import PvdSeries, VTK_LINE, VTK_TRIANGLE
+from fdem.io.vtk import PvdSeries, VTK_LINE, VTK_TRIANGLE, read_pvd
 from fdem.mesh.mesh import structured_rectangle
 from fdem.mesh.topology import build_topology
 from fdem.results.ensemble_summary import fos_distribution_figure, runout_figure, sensitivity_figure
@@ -296,3 +296,48 @@ def test_animation_writes_a_gif_with_one_frame_per_picked_output_frame(tmp_path,
     with pytest.raises(ValueError, match="3 frames, .* has 2"):
         _, short, _ = write_series(tmp_path / "short", 2)
         animate_series(tmp_path / "b.gif", short, write_series(tmp_path / "long", 3)[2])
+
+
+# ----------------------------------------------------------------------------- the report
+def test_report_maps_the_state_at_the_end_of_the_equilibrium_stage_and_animates_the_frames(tmp_path):
+    """A gravity column with crack elements, geostatic start, 40 steps of an ``equilibrium``
+    stage and 30 of a ``runout``: the stress map is of the state the equilibrium stage ended in
+    (positions bit for bit), its ratio is 1 inside, and the GIF has one frame per output frame."""
+    from PIL import Image
+
+    from fdem.physics.crack_properties import CrackProperties
+    from fdem.physics.cracks import CrackSet
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.results.report import RunReport
+    from fdem.solve.geostatic import geostatic_start
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+
+    model = Model.from_mesh(structured_rectangle(4, 40, 2.0, 10.0), ElasticMaterial(1e9, 0.25, 2000.0), exploded=True)
+    model.set_gravity(0.0, -9.81)
+    model.fix("bottom")
+    model.roller("left", "x")
+    model.roller("right", "x")
+    cs = CrackSet(model.topology, {0: CrackProperties(f_t=1e6, c=2e6, phi=30.0, G_I=100.0, G_II=300.0, k_n=1e12,
+                                                      k_t=5e11)})
+    geostatic_start(model, cs)
+    sim = Simulation(model, providers=[cs], out_dir=tmp_path, name="col", progress=False)
+    report = RunReport(sim, toe_x=0.0)
+    assert report.geostatic_state()[2].startswith("start state")  # a geostatic start before any stage
+    sim.run(n_steps=40, stage="equilibrium", history_every=10, output_every=20)
+    x_eq, t_eq = sim.state.x.copy(), sim.state.time
+    sim.run(n_steps=30, stage="runout", history_every=10, output_every=10)
+    sim.close()
+    state, g, label = report.geostatic_state()
+    last = [r for r in sim.history if r["stage"] == "equilibrium"][-1]  # stamped with its step's start
+    assert state.time == t_eq == pytest.approx(last["time"] + last["dt"], rel=1e-12)
+    np.testing.assert_array_equal(state.x, x_eq)
+    assert g == 9.81 and label.startswith("end of the equilibrium stage")
+    topo = model.topology
+    d = depth_below_surface(topo.x0[topo.triangles].mean(1), boundary_segments(topo.x0, topo.boundary_edges))
+    ratio = lithostatic_ratio(sim.stresses(state)["yy"], 2000.0, g, d, min_depth=0.5)
+    np.testing.assert_allclose(ratio[d > 0.5], 1.0, atol=0.01)
+    written = {p.name for p in report.pictures(tmp_path)}
+    assert {"kinetic_energy.png", "failure.png", "geostatic_stress.png", "failure.gif"} <= written
+    with Image.open(tmp_path / "failure.gif") as im:
+        assert im.n_frames == len(read_pvd(tmp_path / "col.pvd"))
