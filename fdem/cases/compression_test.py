@@ -46,7 +46,7 @@ import numpy as np
 from fdem.cases.common import case_parser, check_common, finish_run, open_run, prepare_run, set_threads
 from fdem.io.jsonable import write_json
 
-__all__ = ["NAME", "Specimen", "DEFAULTS", "check_specimen", "mohr_coulomb_ucs", "mohr_coulomb_strength",
+__all__ = ["NAME", "Specimen", "DEFAULTS", "check_specimen", "calibrate", "mohr_coulomb_ucs", "mohr_coulomb_strength",
            "reuss_modulus", "fabric_compliance", "specimen_mesh", "run", "secant_modulus", "parse_args", "main",
            "write_curve", "stress_strain_plot", "failure_plot", "MIN_DIVISIONS", "V_PLATEN_FRACTION"]
 
@@ -71,7 +71,8 @@ peaks 53.22, 52.91, 52.71, 52.56 MPa; halving the speed from the default moves t
 class Specimen(argparse.Namespace):
     """The test's inputs by name (the keys of :data:`DEFAULTS`), SI units: ``width`` [m],
     ``size`` [m], ``young`` [Pa], ``poisson`` [-], ``density`` [kg/m^3], ``f_t``, ``cohesion`` [Pa],
-    ``phi`` [deg], ``g_i``, ``g_ii`` [J/m^2], ``penalty_ratio`` (``p_n = ratio E``),
+    ``phi`` [deg], ``g_i``, ``g_ii`` [J/m^2] (``None``: the snap-back-free rule at ``size``,
+    :mod:`fdem.physics.calibration`), ``penalty_ratio`` (``p_n = ratio E``),
     ``tangential_ratio`` (``p_t = ratio p_n``), ``confinement`` [Pa, compression positive]."""
 
     def __init__(self, **kw):
@@ -93,10 +94,20 @@ class Specimen(argparse.Namespace):
         """Plane-strain modulus of a uniaxial in-plane stress, ``E / (1 - nu^2)`` [Pa]."""
         return self.young / (1.0 - self.poisson ** 2)
 
+    def energies(self) -> tuple[float, float]:
+        """``(G_I, G_II)`` [J/m^2]: the given ones, or where ``None`` the snap-back-free rule at the
+        element size (:class:`fdem.physics.calibration.SizeScaledEnergies`)."""
+        from fdem.physics.calibration import SizeScaledEnergies
+
+        rule = SizeScaledEnergies.rule(self.f_t, self.cohesion, self.penalty, self.tangential_ratio * self.penalty)
+        g_i, g_ii = rule.at(self.size)
+        return (g_i if self.g_i is None else self.g_i), (g_ii if self.g_ii is None else self.g_ii)
+
     def crack_properties(self):
         from fdem.physics.crack_properties import CrackProperties
 
-        return CrackProperties(f_t=self.f_t, c=self.cohesion, phi=self.phi, G_I=self.g_i, G_II=self.g_ii,
+        g_i, g_ii = self.energies()
+        return CrackProperties(f_t=self.f_t, c=self.cohesion, phi=self.phi, G_I=g_i, G_II=g_ii,
                                p_n=self.penalty, p_t=self.tangential_ratio * self.penalty, name="rock bridges")
 
 
@@ -128,17 +139,21 @@ def check_specimen(s: Specimen, v_platen: float | None = None) -> None:
             raise ValueError(f"compression test: {name} must be a finite number {'>' if strict else '>='} {low:g}, "
                              f"got {value!r}")
 
-    for name in ("width", "size", "young", "density", "f_t", "g_i"):
+    for name in ("width", "size", "young", "density", "f_t"):
         finite(name, getattr(s, name))
-    for name in ("cohesion", "g_ii", "confinement"):
+    for name in ("cohesion", "confinement"):
         finite(name, getattr(s, name), strict=False)
+    if s.g_i is not None:
+        finite("g_i", s.g_i)
+    if s.g_ii is not None:
+        finite("g_ii", s.g_ii, strict=False)
     finite("penalty_ratio", s.penalty_ratio, 1.0, strict=False)
     finite("tangential_ratio", s.tangential_ratio)
     if not (isinstance(s.poisson, (int, float)) and 0.0 <= s.poisson < 0.5):
         raise ValueError(f"compression test: poisson must lie in [0, 0.5), got {s.poisson!r}")
     if not (isinstance(s.phi, (int, float)) and 0.0 <= s.phi < 90.0):
         raise ValueError(f"compression test: phi must lie in [0, 90) deg, got {s.phi!r}")
-    if s.cohesion > 0 and s.g_ii <= 0:
+    if s.cohesion > 0 and s.g_ii is not None and s.g_ii <= 0:
         raise ValueError(f"compression test: g_ii must be positive when the cohesion is, got {s.g_ii!r}")
     if s.width / s.size < MIN_DIVISIONS * (1 - 1e-9):
         raise ValueError(f"compression test: element size {s.size:g} m is coarser than the largest allowed, "
@@ -311,10 +326,57 @@ def run(spec: Specimen | None = None, v_platen: float | None = None, out_dir: Pa
         "n_broken": int(cracks.broken.sum()),
         "broken_by_mode": {m: int(np.sum(modes == k)) for k, m in ((1, "I"), (2, "II"), (3, "mixed"))},
         "simulated_time_s": sim.state.time, "time_capped": capped,
-        "inputs": {k: getattr(s, k) for k in DEFAULTS},
+        "inputs": {k: getattr(s, k) for k in DEFAULTS}, "G_I_J_per_m2": props.G_I, "G_II_J_per_m2": props.G_II,
         "time_s": times, "strain": strain.tolist(), "sigma1_Pa": sigma1.tolist(),
         "_sim": sim, "_cracks": cracks,
     }
+
+
+def calibrate(spec: Specimen, target: float, tol: float = 0.003, max_iter: int = 8, v_platen: float | None = None,
+              progress: bool = False, cohesion0: float | None = None) -> tuple[Specimen, list[dict]]:
+    """The cohesion that makes the test's peak ``target`` [Pa] within ``tol`` (relative), the
+    other inputs kept; returns the calibrated :class:`Specimen` and the runs tried.
+
+    Starts from the cohesion of Mohr-Coulomb, ``c_0 = (target - sigma_3 N) (1 - sin phi) /
+    (2 cos phi)``, ``N = (1 + sin phi) / (1 - sin phi)``, corrected by the measured ratio, then
+    by secant steps on ``c`` (the peak is close to linear in ``c`` while shear failure governs);
+    ``cohesion0`` [Pa] replaces that start (a calibration at a neighbouring size).
+    ``g_i = g_ii = None`` (the size rule) is advised: a fixed ``G_II`` may snap back at the
+    larger ``c``. A ``ValueError`` when ``max_iter`` runs do not reach ``tol``."""
+    if not (math.isfinite(target) and target > spec.confinement):
+        raise ValueError(f"compression test: target peak must exceed the confinement {spec.confinement:g} Pa, got {target!r}")
+    sphi = math.sin(math.radians(spec.phi))
+    n_phi = (1 + sphi) / (1 - sphi)
+    c = (target - spec.confinement * n_phi) * (1 - sphi) / (2 * math.cos(math.radians(spec.phi)))
+    c = c if cohesion0 is None else cohesion0
+    tried: list[dict] = []
+    cs, peaks = [], []
+    for _ in range(max_iter):
+        trial = Specimen(**{**{k: getattr(spec, k) for k in DEFAULTS}, "cohesion": c})
+        r = run(trial, v_platen, progress=progress)
+        tried.append({"cohesion_Pa": c, "peak_stress_Pa": r["peak_stress_Pa"], "young_Pa": r["young_Pa"],
+                      "G_I_J_per_m2": r["G_I_J_per_m2"], "G_II_J_per_m2": r["G_II_J_per_m2"], "steps": r["steps"]})
+        cs.append(c)
+        peaks.append(r["peak_stress_Pa"])
+        if abs(peaks[-1] / target - 1) <= tol:
+            return trial, tried
+        if len(cs) == 1 or peaks[-1] == peaks[-2]:
+            c = c * (target - spec.confinement) / (peaks[-1] - spec.confinement)
+        else:
+            slope = (peaks[-1] - peaks[-2]) / (cs[-1] - cs[-2])
+            c = cs[-1] + (target - peaks[-1]) / slope if slope > 0 else c * target / peaks[-1]
+    raise ValueError(f"compression test: {max_iter} runs did not bring the peak within {100 * tol:g} % of "
+                     f"{target:g} Pa (last: c = {cs[-1]:.6g} Pa, peak {peaks[-1]:.6g} Pa)")
+
+
+def _energy(text: str):
+    """A fracture energy option: a number [J/m^2] or ``auto`` (the size rule)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of J/m^2 or 'auto', got {text!r}") from None
 
 
 def _add_options(parser: argparse.ArgumentParser) -> None:
@@ -327,12 +389,17 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
                                  ("--f-t", "f_t", "Pa", "tensile strength f_t of the crack elements"),
                                  ("--cohesion", "cohesion", "Pa", "cohesion c of the crack elements"),
                                  ("--phi", "phi", "deg", "friction angle of the crack elements"),
-                                 ("--g-i", "g_i", "J/m^2", "mode-I fracture energy G_I"),
-                                 ("--g-ii", "g_ii", "J/m^2", "mode-II fracture energy G_II"),
                                  ("--penalty-ratio", "penalty_ratio", "-", "normal penalty p_n / E"),
                                  ("--tangential-ratio", "tangential_ratio", "-", "tangential penalty p_t / p_n"),
                                  ("--confinement", "confinement", "Pa", "lateral pressure sigma_3 (0: uniaxial)")):
         parser.add_argument(opt, type=float, default=d[key], help=f"{what} [{unit}] (default {d[key]:g})")
+    for opt, key, what in (("--g-i", "g_i", "mode-I"), ("--g-ii", "g_ii", "mode-II")):
+        parser.add_argument(opt, type=_energy, default=d[key],
+                            help=f"{what} fracture energy [J/m^2], or 'auto': the snap-back-free rule at the element "
+                                 f"size, fdem.physics.calibration (default {d[key]:g})")
+    parser.add_argument("--target-peak", type=float, default=None, metavar="PA",
+                        help="calibrate: find the cohesion that gives this peak [Pa] (UCS, or the biaxial peak), "
+                             "then report the test at it (use --g-i auto --g-ii auto)")
     parser.add_argument("--v-platen", type=float, default=None,
                         help=f"top platen speed [m/s] (default {V_PLATEN_FRACTION:g} sqrt(E / rho))")
     parser.add_argument("--check-rate", action="store_true",
@@ -351,6 +418,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     try:
         check_specimen(args.spec, args.v_platen)
         args.spec.crack_properties()
+        if args.target_peak is not None and not (math.isfinite(args.target_peak) and args.target_peak > args.confinement):
+            raise ValueError(f"--target-peak must be a number of Pa above the confinement, got {args.target_peak}")
     except ValueError as err:
         parser.error(str(err).replace("compression test: ", ""))
     from fdem.solve.cost import check_mesh_budget, estimate_triangles
@@ -372,6 +441,13 @@ def main(argv=None) -> dict:
     open_run(None, args, NAME)
     set_threads(args.threads)
     out = args.out
+    tried = None
+    if args.target_peak is not None:
+        try:
+            args.spec, tried = calibrate(args.spec, args.target_peak, v_platen=args.v_platen)
+        except ValueError as err:
+            raise SystemExit(f"fdem run {NAME}: {err}")
+        print(f"calibrated: c = {args.spec.cohesion / 1e6:.5g} MPa after {len(tried)} runs")
     r = run(args.spec, args.v_platen, out_dir=out / "fields" if args.fields else None, progress=True,
             max_time=args.max_time)
     kind = "UCS" if args.spec.confinement == 0 else f"biaxial peak at sigma_3 = {args.spec.confinement / 1e6:g} MPa"
@@ -382,6 +458,8 @@ def main(argv=None) -> dict:
           f"{r['steps']} steps, {r['seconds']:.1f} s"
           + (" (SMOKE RUN: stopped at --max-time before the peak was passed)" if r["time_capped"] else ""))
     summary = {"case": NAME, **_public(r)}
+    if tried is not None:
+        summary["calibration"] = {"target_peak_Pa": args.target_peak, "cohesion_Pa": args.spec.cohesion, "runs": tried}
     if args.check_rate:
         half = run(args.spec, r["v_platen_m_per_s"] / 2, max_time=None if args.max_time is None else 2 * args.max_time)
         change = half["peak_stress_Pa"] / r["peak_stress_Pa"] - 1

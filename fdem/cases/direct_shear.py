@@ -211,8 +211,10 @@ def run(joint: Joint | None = None, sigma_n: float = 1e6, v_shear: float | None 
     u, tau, opening = [0.0], [0.0], [0.0]
     y_up0 = x0[upper, 1].mean()
     capped = False
+    fine_until = slip_peak + 0.05 * _softening_slip(j)  # every step about the peak: it lies between checks
     while u[-1] < u_end:
-        sim.run(n_steps=check_every, energy_tolerance=None, output_every=10**9, final_output=False)
+        sim.run(n_steps=1 if u[-1] < fine_until else check_every, energy_tolerance=None, output_every=10**9,
+                final_output=False)
         R = sim.reaction_force(upper)
         u.append(float((sim.state.x[upper, 0] - x0[upper, 0]).mean()))
         tau.append(float(R[0] / L))
