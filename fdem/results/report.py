@@ -83,7 +83,7 @@ class RunReport:
         def inelastic(s):
             # a monitor is the report's one view of the run while it runs: this one also keeps
             # the state of every history row, and the previous row's when that was the last of
-            # an equilibrium stage (the stage column names the row just written)
+            # an equilibrium stage (history[-1] is the row before the one being written)
             prev = s.history[-1]["stage"] if s.history else None
             if prev in EQUILIBRIUM_STAGES and self._latest is not None:
                 self._geostatic = self._latest + (f"end of the {prev} stage, t = {self._latest[0].time:.3g} s",)
