@@ -53,7 +53,8 @@ __all__ = ["NAME", "Specimen", "DEFAULTS", "check_specimen", "calibrate", "mohr_
 NAME = "compression-test"
 
 DEFAULTS = dict(width=0.05, size=0.005, young=10e9, poisson=0.2, density=2700.0, f_t=5e6, cohesion=15e6, phi=30.0,
-                g_i=20.0, g_ii=200.0, penalty_ratio=10.0, tangential_ratio=1.0, confinement=0.0)
+                g_i=20.0, g_ii=200.0, penalty_ratio=10.0, tangential_ratio=1.0, confinement=0.0, strength_cov=0.0,
+                seed=1)
 """A generic hard rock at laboratory size: 50 x 100 mm, h = 5 mm (about 900 triangles)."""
 
 MIN_DIVISIONS = 6
@@ -73,7 +74,9 @@ class Specimen(argparse.Namespace):
     ``size`` [m], ``young`` [Pa], ``poisson`` [-], ``density`` [kg/m^3], ``f_t``, ``cohesion`` [Pa],
     ``phi`` [deg], ``g_i``, ``g_ii`` [J/m^2] (``None``: the snap-back-free rule at ``size``,
     :mod:`fdem.physics.calibration`), ``penalty_ratio`` (``p_n = ratio E``),
-    ``tangential_ratio`` (``p_t = ratio p_n``), ``confinement`` [Pa, compression positive]."""
+    ``tangential_ratio`` (``p_t = ratio p_n``), ``confinement`` [Pa, compression positive],
+    ``strength_cov``: coefficient of variation of normally distributed element strengths (0: none;
+    :class:`fdem.physics.heterogeneity.Heterogeneity`, drawn with ``seed``)."""
 
     def __init__(self, **kw):
         unknown = sorted(set(kw) - set(DEFAULTS))
@@ -149,6 +152,9 @@ def check_specimen(s: Specimen, v_platen: float | None = None) -> None:
         finite("g_ii", s.g_ii, strict=False)
     finite("penalty_ratio", s.penalty_ratio, 1.0, strict=False)
     finite("tangential_ratio", s.tangential_ratio)
+    finite("strength_cov", s.strength_cov, strict=False)
+    if s.strength_cov >= 0.5:
+        raise ValueError(f"compression test: strength_cov must lie in [0, 0.5), got {s.strength_cov!r}")
     if not (isinstance(s.poisson, (int, float)) and 0.0 <= s.poisson < 0.5):
         raise ValueError(f"compression test: poisson must lie in [0, 0.5), got {s.poisson!r}")
     if not (isinstance(s.phi, (int, float)) and 0.0 <= s.phi < 90.0):
@@ -252,7 +258,10 @@ def run(spec: Specimen | None = None, v_platen: float | None = None, out_dir: Pa
     topo = build_topology(specimen_mesh(W, s.size, algorithm))
     model = Model(topo, ElasticMaterial(young=s.young, poisson=s.poisson, density=s.density))
     model.set_element_damping()
-    cracks = CrackSet(topo, {0: props})  # snap-back is refused here, before any step
+    from fdem.physics.heterogeneity import Heterogeneity
+
+    het = Heterogeneity("normal", cov=s.strength_cov, seed=int(s.seed), tags=(0,)) if s.strength_cov > 0 else None
+    cracks = CrackSet(topo, {0: props}, heterogeneity=het)  # snap-back is refused here, before any step
     tol = 1e-6 * W
     x0 = topo.x0
     bottom = model.fix(lambda x, y: y < tol, x=False, y=True)
@@ -391,12 +400,15 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
                                  ("--phi", "phi", "deg", "friction angle of the crack elements"),
                                  ("--penalty-ratio", "penalty_ratio", "-", "normal penalty p_n / E"),
                                  ("--tangential-ratio", "tangential_ratio", "-", "tangential penalty p_t / p_n"),
-                                 ("--confinement", "confinement", "Pa", "lateral pressure sigma_3 (0: uniaxial)")):
+                                 ("--confinement", "confinement", "Pa", "lateral pressure sigma_3 (0: uniaxial)"),
+                                 ("--strength-cov", "strength_cov", "-",
+                                  "coefficient of variation of normal element strengths (0: uniform)")):
         parser.add_argument(opt, type=float, default=d[key], help=f"{what} [{unit}] (default {d[key]:g})")
     for opt, key, what in (("--g-i", "g_i", "mode-I"), ("--g-ii", "g_ii", "mode-II")):
         parser.add_argument(opt, type=_energy, default=d[key],
                             help=f"{what} fracture energy [J/m^2], or 'auto': the snap-back-free rule at the element "
                                  f"size, fdem.physics.calibration (default {d[key]:g})")
+    parser.add_argument("--seed", type=int, default=d["seed"], help="seed of the strength draws (default 1)")
     parser.add_argument("--target-peak", type=float, default=None, metavar="PA",
                         help="calibrate: find the cohesion that gives this peak [Pa] (UCS, or the biaxial peak), "
                              "then report the test at it (use --g-i auto --g-ii auto)")
