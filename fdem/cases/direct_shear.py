@@ -12,7 +12,9 @@ reaction of the upper block over ``L``,
 
     tau = R_x / L,   u = (x displacement of the upper block),
 
-its peak (``c + sigma_n tan(phi)`` of the crack law) and its residual (the mean over the last
+its peak before the first joint element breaks (``c + sigma_n tan(phi)`` of the crack law;
+the handover of a broken element's preload to contact kicks ``tau`` for a few steps, which is
+reported apart as ``max_tau_after_breaking_Pa``) and its residual (the mean over the last
 fifth of the displacement: the broken joint's faces in contact with friction ``phi_res``,
 ``sigma_n tan(phi_res)``) at each ``sigma_n``; a least-squares line through the peaks gives
 the fitted ``c`` and ``phi`` (the verification row: they must be the inputs).
@@ -209,6 +211,8 @@ def run(joint: Joint | None = None, sigma_n: float = 1e6, v_shear: float | None 
     sim = Simulation(model, providers=[cracks, contact], progress=progress)
     t0 = time.perf_counter()
     u, tau, opening = [0.0], [0.0], [0.0]
+    joint = cracks.tag == 1
+    n_intact = []  # joint elements not yet broken, per sample
     y_up0 = x0[upper, 1].mean()
     capped = False
     fine_until = slip_peak + 0.05 * _softening_slip(j)  # every step about the peak: it lies between checks
@@ -219,6 +223,7 @@ def run(joint: Joint | None = None, sigma_n: float = 1e6, v_shear: float | None 
         u.append(float((sim.state.x[upper, 0] - x0[upper, 0]).mean()))
         tau.append(float(R[0] / L))
         opening.append(float(sim.state.x[upper, 1].mean() - y_up0))
+        n_intact.append(int(np.count_nonzero(joint & ~cracks.broken)))
         if max_time is not None and sim.state.time >= max_time:
             capped = True
             break
@@ -226,9 +231,16 @@ def run(joint: Joint | None = None, sigma_n: float = 1e6, v_shear: float | None 
     sim.close()
     u, tau = np.array(u), np.array(tau)
     tail = u >= 0.8 * u[-1]
+    # The peak is read before the first joint element breaks: a broken element's preload (the
+    # static start's compression at zero separation) goes to contact, which needs an overlap to
+    # carry it; the upper block drops into it and tau kicks for a few steps (measured: 811 kPa
+    # against the law's 777 kPa at 1 MPa, generic joint), a handover transient, not strength.
+    intact = np.concatenate([[True], np.array(n_intact) == np.count_nonzero(joint)])
+    ipk = int(np.argmax(np.where(intact, tau, -np.inf)))
     broken_joint = cracks.broken & (cracks.tag == 1)
     return {
-        "sigma_n_Pa": sigma_n, "peak_tau_Pa": float(tau.max()), "u_at_peak_m": float(u[int(np.argmax(tau))]),
+        "sigma_n_Pa": sigma_n, "peak_tau_Pa": float(tau[ipk]), "u_at_peak_m": float(u[ipk]),
+        "max_tau_after_breaking_Pa": float(tau[~intact].max()) if (~intact).any() else None,
         "residual_tau_Pa": float(tau[tail].mean()), "expected_peak_Pa": tau_peak,
         "expected_residual_Pa": sigma_n * props.tan_phi_res,
         "joint_broken_fraction": float(broken_joint.sum() / max(1, np.count_nonzero(cracks.tag == 1))),
