@@ -23,6 +23,10 @@ meshes at ``--size``, starts in static equilibrium and finds its factor of safet
 reduction in ``[0.5, 2.5]`` to 0.05.
 
     python cases/ensemble.py --out runs/ensemble --n 20 --workers 2 --size 2.0
+    fdem run ensemble --scheduler-file ~/scheduler.json --n 200 --out runs/ensemble   # on a cluster
+
+Needs Dask (``pip install "fdem[ensembles]"``); without it the case stops before anything else
+with that command in its message.
 """
 from __future__ import annotations
 
@@ -37,7 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.workflow.ensembles import Distribution, Ensemble, run_ensemble
+from fdem.workflow.ensembles import (DASK_MISSING, Distribution, Ensemble, check_scheduler_file, require_dask,
+                                     run_ensemble)
 from fdem.results.ensemble_summary import summarize
 from fdem.io.jsonable import write_json
 
@@ -161,7 +166,11 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
     parser.add_argument("--out", type=Path, default=Path("runs/ensemble"))
     parser.add_argument("--n", type=int, default=20, help="realizations")
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (one Numba thread each)")
-    parser.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: local)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: local)")
+    where.add_argument("--scheduler-file", type=Path, default=None, metavar="PATH",
+                       help="the file a running Dask scheduler wrote (dask scheduler --scheduler-file PATH): "
+                            "a cluster started by a batch system or dask-jobqueue")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for --scheduler")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--method", choices=("lhs", "mc"), default="lhs")
@@ -170,6 +179,15 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
                         help="cap on each trial's simulated time [s] (a smoke run: realizations end below_bracket)")
     parser.add_argument("--no-pictures", action="store_true", help="no PNG pictures")
     args = parser.parse_args(argv)
+    try:
+        require_dask()
+    except ImportError:
+        parser.exit(1, f"fdem run ensemble: {DASK_MISSING}\n")
+    if args.scheduler_file is not None:
+        try:
+            check_scheduler_file(args.scheduler_file)
+        except (OSError, ValueError) as err:
+            parser.error(f"--scheduler-file: {err}")
     if not (math.isfinite(args.size) and args.size > 0):
         parser.error(f"--size must be a positive number of metres, got {args.size}")
     if args.workers < 1:
@@ -188,9 +206,12 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
 def main(argv=None) -> dict:
     args, ens = parse_args(argv)
     load = os.getloadavg()
-    run = run_ensemble(ens, args.out, workers=args.workers, scheduler=args.scheduler, timeout=args.timeout)
+    run = run_ensemble(ens, args.out, workers=args.workers, scheduler=args.scheduler, timeout=args.timeout,
+                       scheduler_file=args.scheduler_file)
     summary = summarize(args.out, pictures=not args.no_pictures)
-    timing = {"workers": args.workers if args.scheduler is None else None, "scheduler": args.scheduler,
+    remote = args.scheduler is not None or args.scheduler_file is not None
+    timing = {"workers": None if remote else args.workers, "scheduler": args.scheduler,
+              "scheduler_file": None if args.scheduler_file is None else str(args.scheduler_file),
               "n": args.n, "n_run": run.n_run, "n_skipped": run.n_skipped, "wall_seconds": run.wall_seconds,
               "load_average_before": load, "load_average_after": os.getloadavg(), "cpu_count": os.cpu_count(),
               "size_m": args.size, "date": time.strftime("%Y-%m-%d %H:%M")}

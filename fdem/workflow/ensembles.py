@@ -23,7 +23,11 @@ no dimension of the hypercube.
 then :func:`fdem.workflow.fos.factor_of_safety`; optionally :func:`fdem.workflow.slope.run_slope_workflow`
 and :func:`fdem.results.analysis.runout`) on a local ``dask.distributed`` cluster of single-threaded
 worker processes (``NUMBA_NUM_THREADS=1`` in each worker's environment, set before Numba is
-imported) or on a scheduler the user names. Rows stream into ``<out>/realizations.csv`` as
+imported) or on a running cluster: a scheduler address, or the file a scheduler writes
+(``dask scheduler --scheduler-file PATH``, the usual way on a batch system). Every worker,
+local or remote, is held to one Numba thread by a worker plugin
+(:class:`fdem.workflow.dask_workers.SingleThreadNumba`). Dask is an optional dependency
+(``pip install "fdem[ensembles]"``), imported only here, when an ensemble runs. Rows stream into ``<out>/realizations.csv`` as
 tasks finish (``as_completed``): the sampled parameters (``p_<name>``), the FoS and its
 bracket, wall times, the worker's peak resident memory, the status and the error text. A
 realization that raises (meshing, instability, a contradicted bracket) is a row with its error,
@@ -56,7 +60,11 @@ from typing import Callable, Mapping
 import numpy as np
 from fdem.io.ensemble_table import finite_number, DESCRIPTION, TABLE, _HEADER, read_table
 
-__all__ = ["Distribution", "Ensemble", "realize", "local_cluster", "connect", "EnsembleRun", "run_ensemble"]
+__all__ = ["DASK_MISSING", "Distribution", "Ensemble", "realize", "require_dask", "local_cluster",
+           "check_scheduler_file", "connect", "EnsembleRun", "run_ensemble"]
+
+DASK_MISSING = 'ensembles run on Dask, which is not installed: pip install "fdem[ensembles]"'
+"""The message when Dask is missing: the one command that installs it."""
 
 
 _KINDS = ("fixed", "uniform", "normal", "lognormal", "seed")
@@ -389,6 +397,15 @@ def _check_table(path: Path, digest: str) -> set[int]:
 
 
 # ----------------------------------------------------------------------------- Dask
+def require_dask() -> None:
+    """Import ``dask.distributed`` or raise ``ImportError`` with :data:`DASK_MISSING` (the pip
+    command), before any work starts."""
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError as err:
+        raise ImportError(f"{DASK_MISSING} ({err})") from None
+
+
 def local_cluster(n_workers: int = 2, **kwargs):
     """A local ``dask.distributed`` cluster of ``n_workers`` processes with one thread each and
     ``NUMBA_NUM_THREADS=1`` (``OMP_NUM_THREADS=1``) in their environment, which the worker
@@ -409,15 +426,41 @@ def local_cluster(n_workers: int = 2, **kwargs):
     return LocalCluster(**opts)
 
 
-def connect(address: str, timeout: float = 10.0):
-    """A ``dask.distributed.Client`` on the scheduler at ``address``; a ``ConnectionError`` naming
-    the address if it does not answer within ``timeout`` [s]."""
+def check_scheduler_file(path) -> Path:
+    """``path`` as a ``Path`` if it is a readable scheduler file (JSON with an ``address``, as
+    ``dask scheduler --scheduler-file`` writes it); a ``FileNotFoundError`` or ``ValueError``
+    naming the file otherwise. Cheap, so callers check before any other work."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"Dask scheduler file {str(path)!r} does not exist (start the scheduler with "
+                                f"`dask scheduler --scheduler-file {path}` first); nothing was run")
+    try:
+        address = json.loads(path.read_text()).get("address")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise ValueError(f"Dask scheduler file {str(path)!r} is not a scheduler's JSON file ({exc}); "
+                         "nothing was run") from None
+    if not address:
+        raise ValueError(f"Dask scheduler file {str(path)!r} names no scheduler address; nothing was run")
+    return path
+
+
+def connect(address: str | None = None, timeout: float = 10.0, scheduler_file=None):
+    """A ``dask.distributed.Client`` on the scheduler at ``address``, or on the one that wrote
+    ``scheduler_file`` (:func:`check_scheduler_file`); a ``ConnectionError`` naming the address
+    or file if the scheduler does not answer within ``timeout`` [s]."""
+    require_dask()
     from dask.distributed import Client
 
+    if scheduler_file is not None:
+        where = f"named in {str(check_scheduler_file(scheduler_file))!r}"
+        kwargs = dict(scheduler_file=str(scheduler_file))
+    else:
+        where = f"at {address!r}"
+        kwargs = dict(address=address)
     try:
-        return Client(address, timeout=f"{float(timeout)}s")
+        return Client(timeout=f"{float(timeout)}s", **kwargs)
     except (OSError, TimeoutError) as exc:
-        raise ConnectionError(f"the Dask scheduler at {address!r} did not answer within {timeout:g} s "
+        raise ConnectionError(f"the Dask scheduler {where} did not answer within {timeout:g} s "
                               f"({type(exc).__name__}: {exc}); nothing was run") from None
 
 
@@ -434,17 +477,24 @@ class EnsembleRun:
 
 
 def run_ensemble(ensemble: Ensemble, out, workers: int = 2, scheduler: str | None = None, client=None,
-                 timeout: float = 10.0, progress: bool = True) -> EnsembleRun:
+                 timeout: float = 10.0, progress: bool = True, scheduler_file=None) -> EnsembleRun:
     """Run every realization of ``ensemble`` not yet in ``<out>/realizations.csv`` as one Dask task.
 
-    Cluster: ``client`` if given, else the scheduler at ``scheduler`` (:func:`connect`, refused
-    within ``timeout`` if it does not answer), else :func:`local_cluster` with ``workers``
-    processes. Rows are appended as tasks finish; a failing pictures' PNG goes to
-    ``<out>/realizations/<index>_failure.png``. ``<out>/ensemble.json`` holds the description
-    and its hash; the table's first line the hash. Checks (description, table, scheduler) all
-    happen before any task runs.
+    Cluster: ``client`` if given, else the scheduler that wrote ``scheduler_file`` or the one at
+    ``scheduler`` (:func:`connect`, refused within ``timeout`` if it does not answer), else
+    :func:`local_cluster` with ``workers`` processes. Every worker is held to one Numba thread
+    (:class:`fdem.workflow.dask_workers.SingleThreadNumba`). Rows are appended as tasks finish;
+    a failing pictures' PNG goes to ``<out>/realizations/<index>_failure.png``.
+    ``<out>/ensemble.json`` holds the description and its hash; the table's first line the hash.
+    Checks (Dask installed, scheduler file, description, table, scheduler) all happen before any
+    task runs.
     """
+    require_dask()
+    if scheduler_file is not None:
+        check_scheduler_file(scheduler_file)
     from dask.distributed import Client, as_completed
+
+    from fdem.workflow.dask_workers import register_single_thread
 
     out = Path(out)
     digest = ensemble.fingerprint()
@@ -454,11 +504,12 @@ def run_ensemble(ensemble: Ensemble, out, workers: int = 2, scheduler: str | Non
     todo = [i for i in range(ensemble.n) if i not in done]
     own_client = own_cluster = None
     if client is None:
-        if scheduler is not None:
-            client = own_client = connect(scheduler, timeout)
+        if scheduler is not None or scheduler_file is not None:
+            client = own_client = connect(scheduler, timeout, scheduler_file=scheduler_file)
         else:
             own_cluster = local_cluster(workers)
             client = own_client = Client(own_cluster)
+    register_single_thread(client)
     out.mkdir(parents=True, exist_ok=True)
     (out / DESCRIPTION).write_text(json.dumps({"sha256": digest, "description": ensemble.describe(),
                                                "samples": samples}, indent=1, default=repr))

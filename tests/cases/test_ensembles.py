@@ -269,3 +269,62 @@ def test_case_cross_joints_stay_in_the_block_and_leave_the_sliding_plane_whole()
             # The sliding plane keeps its whole length H / sin(psi_p) = 17.434 m: no bridge in it.
             assert np.linalg.norm(plane[:, 1] - plane[:, 0], axis=1).sum() == pytest.approx(
                 10.0 / math.sin(math.radians(35.0)), rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- beyond the laptop
+def test_worker_plugin_holds_a_worker_started_with_more_threads_to_one():
+    """A worker started with NUMBA_NUM_THREADS=2 (a cluster node's default) runs on one thread once
+    the plugin is registered: in its environment, in Numba, and in the thread that runs a task."""
+    from dask.distributed import Client
+
+    from fdem.workflow.dask_workers import register_single_thread
+    from fdem.workflow.ensembles import realize
+
+    def threads():
+        import numba
+
+        return os.environ.get("NUMBA_NUM_THREADS"), numba.get_num_threads()
+
+    with local_cluster(1, env={"NUMBA_NUM_THREADS": "2"}) as cluster, Client(cluster) as c:
+        assert list(c.run(threads).values()) == [("2", 2)]              # as started
+        register_single_thread(c)
+        assert list(c.run(threads).values()) == [("1", 1)]              # read back on the worker
+        ens = Ensemble(scene_function, {"cohesion": Distribution.fixed(1.0)}, n=1)
+        row = c.submit(realize, ens, 0, {"cohesion": 1.0}, pure=False).result()
+    assert row["numba_threads"] == 1 and "NotImplementedError" in row["error"]   # the task's own thread
+
+
+def test_scheduler_file_runs_a_realization_on_that_cluster(client, tmp_path):
+    marker_dir = tmp_path / "markers"
+    marker_dir.mkdir()
+    path = tmp_path / "scheduler.json"
+    client.write_scheduler_file(str(path))
+    ens = Ensemble(CountingPlanarScene(3.0, str(marker_dir)), PARAMETERS, n=1, seed=5, fos=FOS)
+    run = run_ensemble(ens, tmp_path / "run", scheduler_file=path, progress=False)
+    assert run.n_run == 1 and markers(marker_dir) == 1
+    (row,) = run.rows
+    assert row["status"] == "ok" and row["numba_threads"] == 1
+    assert row["worker_pid"] in {p for p in client.run(os.getpid).values()}   # ran on that cluster's workers
+    F = hoek_bray(row["p_cohesion"], row["p_friction_angle"])
+    assert row["fos_lower"] <= 1.02 * F and 0.98 * F <= row["fos_upper"]
+
+
+def test_missing_scheduler_file_is_refused_before_any_work(tmp_path, capsys):
+    from ensemble import parse_args
+
+    marker_dir = tmp_path / "markers"
+    marker_dir.mkdir()
+    missing = tmp_path / "nowhere" / "scheduler.json"
+    ens = Ensemble(CountingPlanarScene(3.0, str(marker_dir)), PARAMETERS, n=2, fos=FOS)
+    t = time.perf_counter()
+    with pytest.raises(FileNotFoundError, match=str(missing)):
+        run_ensemble(ens, tmp_path / "run", scheduler_file=missing, progress=False)
+    assert time.perf_counter() - t < 2.0
+    assert markers(marker_dir) == 0 and not (tmp_path / "run").exists()
+    with pytest.raises(SystemExit) as stop:                             # the case: a usage error naming the file
+        parse_args(["--scheduler-file", str(missing), "--out", str(tmp_path / "case")])
+    assert stop.value.code == 2 and str(missing) in capsys.readouterr().err
+    not_json = tmp_path / "scheduler.txt"
+    not_json.write_text("tcp://127.0.0.1:8786")
+    with pytest.raises(ValueError, match="not a scheduler's JSON file"):
+        run_ensemble(ens, tmp_path / "run", scheduler_file=not_json, progress=False)
