@@ -67,8 +67,10 @@ COMPRESSORS = {"zlib": "vtkZLibDataCompressor", "lzma": "vtkLZMADataCompressor"}
 """``compression`` values of :func:`write_vtu` and the VTK compressor each one names."""
 
 
-BLOCK_SIZE = 1 << 20
-"""Uncompressed bytes per compressed block [B] (VTK's own writer uses 32 KiB; any size reads)."""
+BLOCK_SIZE = 1 << 15
+"""Uncompressed bytes per compressed block [B], VTK's own writer's 32 KiB (any size reads): zlib
+level 1 compressed a 26 MB float32 frame in 0.40 s in 32 KiB blocks against 0.63 s in 1 MiB
+ones, to within 0.1 % of the same size (the smaller block stays in cache; ``docs/outputs.md``)."""
 
 
 def _compress_threads() -> int:
