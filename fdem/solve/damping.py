@@ -34,5 +34,15 @@ class Damping:
     def quasi_static(cls, local: float = 0.8) -> "Damping":
         return cls(local=local)
 
+    @classmethod
+    def critical(cls, omega: float) -> "Damping":
+        """Mass-proportional damping critical for a mode of angular frequency ``omega`` [rad/s]:
+        ``alpha = 2 omega``. That mode then settles as fast as any viscous damping can settle it
+        (its displacement decays as ``(1 + omega t) exp(-omega t)``), and every higher mode decays at
+        the same rate ``alpha / 2 = omega`` (Chopra 2017, *Dynamics of Structures*, sec. 2.2 and 11.4)."""
+        if not (math.isfinite(omega) and omega > 0):
+            raise ValueError(f"critical damping needs a positive finite angular frequency, got {omega!r}")
+        return cls(mass_proportional=2.0 * omega)
+
 
 NO_DAMPING = Damping()

@@ -36,10 +36,12 @@ from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 from numba import njit, prange
 from fdem.kernels.triangles import (FASTMATH, TC_MASS, assemble_triangle_forces, triangle_constants, triangle_response)
 from fdem.physics.cracks import CP_C, CP_FT, CP_TANPHI
+from fdem.solve.density_scaling import nodal_stiffness
 from fdem.solve.model import FIX_X, FIX_Y
 
 __all__ = ["GeostaticSolution", "GeostaticReport", "conforming_static_stress", "nodal_residual",
            "preload_residual", "crack_preload_forces", "crack_strength_check", "geostatic_start",
+           "rayleigh_frequency", "unbalanced_forces", "unbalanced_ratio_floor",
            "unbalanced_force_ratio"]
 
 
@@ -301,6 +303,39 @@ def conforming_static_stress(model) -> GeostaticSolution:
 
 
 # --------------------------------------------------------------------------- 2. crack preloads
+def rayleigh_frequency(model, solution: GeostaticSolution | None = None) -> float:
+    """Rayleigh's estimate [rad/s] of the fundamental angular frequency of the intact slope, from
+    its static deflection ``u`` under its own loads ``f`` (gravity and constant nodal loads):
+
+    ``omega_R^2 = sum_p f_p . u_p / sum_p m_p |u_p|^2``
+
+    over the conforming mesh points ``p`` (``m_p`` the lumped mass, ``sum_e rho_e A_e / 3``).
+    The static deflection is the classical trial shape of Rayleigh's method (Clough & Penzien
+    1993, *Dynamics of Structures*, sec. 8-3); the estimate lies above the true lowest frequency
+    by the error of the shape squared. It is the mode that a quasi-static stage under gravity
+    has to settle: its critical mass-proportional damping is ``alpha = 2 omega_R``. On the
+    four-slope scene ``omega_R`` is 2.0 times the shear-beam ``2 pi / (4 H / c_s)``
+    (:func:`fdem.workflow.stages.response_time`): gravity deflects the slope mostly in vertical
+    compression, which rings at the P-wave speed, and the slope above the toe is shorter than ``H``.
+
+    ``solution``: a :func:`conforming_static_stress` already computed (else it is solved here).
+    Raises ``ValueError`` when the loads do no work (no gravity, no load)."""
+    sol = conforming_static_stress(model) if solution is None else solution
+    points, tri, node_point = _mesh_layout(model)
+    area = np.abs(_shape_gradients(points, tri)[1])
+    m = np.zeros(len(points))
+    np.add.at(m, tri.ravel(), np.repeat(model.property_array("density") * area / 3.0, 3))
+    f = m[:, None] * model.gravity[None, :]
+    np.add.at(f, node_point, model.external_force)
+    u = sol.displacement
+    work = float((f * u).sum())
+    inertia = float((m[:, None] * u * u).sum())
+    if not (work > 0.0 and inertia > 0.0):
+        raise ValueError(f"rayleigh_frequency: the loads do no work on the static deflection (work {work:.3g} J/m); "
+                         "give the model gravity or a load")
+    return math.sqrt(work / inertia)
+
+
 def _crack_frame(x0, crack_nodes):
     """(n, 2) unit normal of each crack element from A into B, as the crack kernel computes it:
     ``t = (m1 - m0)/|m1 - m0|``, ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``, ``n = (t_y, -t_x)``."""
@@ -510,6 +545,23 @@ def geostatic_start(model, cracks=None, replace: bool = False) -> GeostaticRepor
 
 # --------------------------------------------------------------------------- 4. convergence measure
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
+def _unbalanced_nodal_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscous, out):
+    """``out[n] = f_net`` [N/m] of every node of an exploded mesh (node ``3t+k``): triangle force at
+    ``x``, gravity on the real mass, interaction and external force; supported components zero."""
+    for t in prange(tc.shape[0]):
+        i = 3 * t
+        r = triangle_response(tc, t, x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1], x[i + 2, 0], x[i + 2, 1],
+                              v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1], use_viscous)
+        m = tc[t, TC_MASS]
+        for k in range(3):
+            n = i + k
+            fx = r[2 * k] + m * gx + f_int[n, 0] + f_ext[n, 0]
+            fy = r[2 * k + 1] + m * gy + f_int[n, 1] + f_ext[n, 1]
+            out[n, 0] = 0.0 if flags[n] & 1 else fx
+            out[n, 1] = 0.0 if flags[n] & 2 else fy
+
+
+@njit(parallel=True, fastmath=FASTMATH, cache=True)
 def _unbalanced_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscous):
     """Sums ``(sum |f_net| over free components, sum |m g|)`` on an exploded mesh (node ``3t+k``)."""
     num = 0.0
@@ -531,6 +583,52 @@ def _unbalanced_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscous):
             num += math.sqrt(fx * fx + fy * fy)
             den += m * g
     return num, den
+
+
+def unbalanced_forces(sim) -> np.ndarray:
+    """(n_nodes, 2) unbalanced force ``f_net`` [N/m] of every node: the terms of
+    :func:`unbalanced_force_ratio`'s numerator, node by node (supported components zero), to map
+    where a stage's residual sits (crack elements in softening, contact, supports, scaled nodes)."""
+    st = sim.state
+    if sim.exploded:
+        out = np.empty_like(st.x)
+        _unbalanced_nodal_exploded(st.x, st.v, sim.tc, sim.f_interaction, sim.f_external, sim.flags,
+                                   float(sim.gravity[0]), float(sim.gravity[1]), sim.use_viscous, out)
+        return out
+    corner = np.zeros((3 * sim.model.n_triangles, 2))
+    assemble_triangle_forces(st.x, st.v, sim.triangles, sim.tc, corner)
+    f = st.mass[:, None] * sim.gravity[None, :] + sim.f_external + sim.f_interaction
+    np.add.at(f, sim.triangles.ravel(), corner)
+    f[(sim.flags & FIX_X) != 0, 0] = 0.0
+    f[(sim.flags & FIX_Y) != 0, 1] = 0.0
+    return f
+
+
+def unbalanced_ratio_floor(sim) -> float:
+    """Round-off floor of :func:`unbalanced_force_ratio` [-]:
+
+    ``R_eps = sum_n S_n eps(x_n) / sum_n |m_n g|``
+
+    with ``S_n`` [N/m] the node's stiffness (:func:`fdem.solve.density_scaling.nodal_stiffness`:
+    its triangles, crack-element penalties and contact) and ``eps(x_n)`` [m] the spacing of
+    float64 numbers at its coordinates (``numpy.spacing``). Positions are stored to that spacing,
+    so each force is known only to about ``S eps``; the ratio cannot fall much below ``R_eps``
+    however long a stage runs. It grows as the mesh refines (the crack penalties per node grow
+    against the node's weight): 6.4e-6 on the four-slope scene at size 1.0, 1.0e-5 at 0.5 and
+    ``docs/benchmarks.md`` "Equilibrium stage at scale" for 180k triangles, where the ratio
+    measured at rest sits 2.6-2.9 times above it (1.64e-5 at size 1.0; 4.3e-4 with the same
+    model moved 1000 m from the origin, where positions are 20 times coarser)."""
+    mass = sim.state.mass
+    tri = getattr(sim, "_triangle_stiffness", None)
+    s = nodal_stiffness(sim.model, sim.providers, mass, tri)
+    eps = np.spacing(np.abs(sim.state.x)).max(axis=1)
+    num = float(s @ eps)
+    den = float(mass.sum() * np.linalg.norm(sim.gravity))
+    if den == 0.0:
+        den = float(np.linalg.norm(sim.f_external, axis=1).sum())
+    if den == 0.0:
+        raise ValueError("unbalanced_ratio_floor: no gravity and no external load to compare with")
+    return num / den
 
 
 def unbalanced_force_ratio(sim) -> float:

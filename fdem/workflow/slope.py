@@ -5,8 +5,9 @@ Composed of :mod:`fdem.workflow.stages` so that a case script only builds the mo
 
 1. **Equilibrium check** at ``F = 1`` (the model must come from a geostatic start,
    :func:`fdem.solve.geostatic.geostatic_start`): a damped stage that must converge; a slope that
-   does not stand at ``F = 1`` is reported, not hidden. Damped stages use
-   :func:`fdem.workflow.fos.fundamental_damping` (mass-proportional, critical for the fundamental mode).
+   does not stand at ``F = 1`` is reported, not hidden. It is damped critically for the slope's
+   Rayleigh frequency (:func:`equilibrium_damping`); the later damped stages use
+   :func:`fdem.workflow.fos.fundamental_damping` (mass-proportional, critical for the shear-beam mode).
 2. **Factor of safety** (optional): :func:`fdem.workflow.fos.factor_of_safety` from that state.
 3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
    damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
@@ -30,12 +31,13 @@ import math
 import numbers
 from dataclasses import dataclass, field
 import numpy as np
-from fdem.solve.damping import NO_DAMPING
+from fdem.solve.damping import NO_DAMPING, Damping
+from fdem.solve.geostatic import rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import check_bracket, factor_of_safety, fundamental_damping
 
-__all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "runout_stage",
+__all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures"]
 
 
@@ -136,6 +138,26 @@ def _check_positive(wf: "SlopeWorkflow", name: str, optional: bool = False) -> N
                          f"got {v!r}")
 
 
+def equilibrium_damping(sim: Simulation) -> Damping:
+    """Damping of the equilibrium stage: mass-proportional, critical for the slope's Rayleigh
+    frequency ``omega_R`` (:func:`fdem.solve.geostatic.rayleigh_frequency`, the mode of its
+    deflection under gravity), ``alpha = 2 omega_R``; :func:`fdem.workflow.fos.fundamental_damping`
+    when the static deflection cannot be solved.
+
+    The stage starts from the static start with the crack elements whose pre-load is above
+    their strength put back on their envelope, which unbalances the slope (ratio 0.22 at once on
+    the four-slope scene) and rings its modes. The shear-beam damping ``4 pi / T`` settled them
+    at ``2 pi / T`` per second, because ``omega_R`` is twice ``2 pi / T`` there: the stage took
+    1.26 T. Critical for ``omega_R`` it takes 0.68 T, and less of the released energy goes into
+    fracture through the ringing (208 J/m instead of 225 at size 1.0); twice that damping (4
+    times the shear-beam value) overdamps the slope's slow mode and takes 1.18 T
+    (``docs/benchmarks.md``, "Equilibrium stage at scale")."""
+    try:
+        return Damping.critical(rayleigh_frequency(sim.model))
+    except ValueError:
+        return fundamental_damping(sim)
+
+
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None,
                        journal=None) -> dict:
     """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
@@ -154,6 +176,8 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     step_time = wf.step_time or 5.0 * T
     fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
     damped = fundamental_damping(sim)
+    if "unbalanced_ratio" not in sim.monitors:  # how far from equilibrium, in every history row
+        sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)
     summary: dict = {"response_time_s": T, "stages": [], "fos": None, "failed_at_factor": None}
 
     def record(result):
@@ -198,7 +222,8 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
 def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir, journal) -> None:
     if journal is None or journal.resume is None and not journal.done:
         cracks.hold_elastic(False)
-    eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0, damping=damped,
+    eq = record(run_stage(sim, Stage("equilibrium", max_time=step_time, reduction=1.0,
+                                     damping=equilibrium_damping(sim),
                                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail),
                           journal=journal))
     summary["equilibrium"] = eq.reason
