@@ -2,6 +2,7 @@
 
 ``fdem list``                       the cases it can run, one line each
 ``fdem run NAME [options]``         run a case (``fdem run NAME --help`` lists its options)
+``fdem run FILE.toml [options]``    run a scene file (``docs/scenes.md``; ``fdem run scene --help``)
 ``fdem demo [options]``             the same as ``fdem run quick-start``
 ``fdem info FILE.msh``              quality report and crack-element counts of a mesh
 ``fdem --version``                  the installed version (``python -m fdem`` is the same command)
@@ -31,6 +32,9 @@ def _run_case(name: str, argv: list[str]) -> int:
     # --threads must reach NUMBA_NUM_THREADS before any kernel module imports numba
     from fdem.cases import case_module
     from fdem.cases.common import set_threads
+
+    if name.endswith(".toml"):  # fdem run my_slope.toml: the scene runner
+        name, argv = "scene", [name, *argv]
 
     for i, a in enumerate(argv):
         # (0 is left to the case's own check, which names the option)

@@ -23,6 +23,7 @@ CASES = {
     "seismic-slope": "fdem.cases.seismic_slope",
     "compression-test": "fdem.cases.compression_test",
     "direct-shear": "fdem.cases.direct_shear",
+    "scene": "fdem.cases.scene",
 }
 """Case name (as ``fdem run`` takes it) -> module."""
 

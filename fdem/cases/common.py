@@ -44,7 +44,8 @@ from pathlib import Path
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
            "prepare_run", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
-           "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report"]
+           "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report",
+           "add_write_scene_option", "write_case_scene"]
 
 CONFIRM_ABOVE_HOURS = 12.0
 """A run whose estimated wall time is above this asks for ``--yes`` (refused without it when no
@@ -73,7 +74,7 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
                 name: str | None = None) -> argparse.ArgumentParser:
     """An ``argparse`` parser with the shared options; a case adds its own after these.
     ``name``: the case's name in ``fdem run NAME`` (its usage line says so under ``fdem``)."""
-    prog = f"fdem run {name}" if name and Path(sys.argv[0]).name == "fdem" else None
+    prog = f"fdem run {name}" if name and Path(sys.argv[0]).name in ("fdem", "__main__.py") else None
     parser = argparse.ArgumentParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path(out), help=f"output folder (default {out})")
     parser.add_argument("--size", type=float, default=size, help=size_help)
@@ -87,7 +88,46 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
                              "model's mass (default 0.01; 0: real masses in every stage)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the earlier run in --out (its frames, pictures, checkpoints and summary)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars, only warnings and the result")
     return parser
+
+
+def add_write_scene_option(parser: argparse.ArgumentParser) -> None:
+    """``--write-scene FILE``: a slope case writes its scene as a scene file and stops
+    (:func:`write_case_scene`); ``fdem run FILE`` then runs the same model."""
+    parser.add_argument("--write-scene", type=Path, default=None, metavar="FILE",
+                        help="write this case, with the options given, as a scene file (fdem run FILE runs it) "
+                             "and stop")
+
+
+def write_case_scene(parser: argparse.ArgumentParser, name: str, scene: dict, path: Path, argv) -> dict:
+    """Check the case's ``scene`` (a raw scene ``dict`` as a TOML file holds it; ``None`` values
+    are left out) with :func:`fdem.scene.schema.check_scene` and write it to ``path``; returns
+    the summary of that ending (outcome ``scene written``). A scene the schema refuses is a
+    defect of the case and raises."""
+    from fdem.scene.schema import check_scene
+    from fdem.scene.write import write_scene
+
+    def drop_none(v):
+        if isinstance(v, dict):
+            return {k: drop_none(x) for k, x in v.items() if x is not None}
+        if isinstance(v, list):
+            return [drop_none(x) for x in v]
+        return v
+
+    scene = drop_none(scene)
+    check_scene(scene, path)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    shown = " ".join(a for i, a in enumerate(argv) if a != "--write-scene" and not a.startswith("--write-scene=")
+                     and not (i and argv[i - 1] == "--write-scene"))
+    title = (f"fdem run {name} {shown}".rstrip() + f", written as a scene file.\nRun it with: fdem run {path}\n"
+             "Every key, its unit and range: docs/scenes.md")
+    try:
+        write_scene(path, scene, title=title)
+    except OSError as err:
+        parser.error(f"--write-scene {path}: {err.strerror or err}")
+    print(f"wrote {path}; run it with: fdem run {path}")
+    return {"case": name, "outcome": "scene written", "scene_file": str(path)}
 
 
 def add_resume_options(parser: argparse.ArgumentParser) -> None:

@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
+from fdem.cases.common import (add_resume_options, add_write_scene_option, cap_simulated_time, case_parser, check_common, check_mesh_size,
                                finish_run, open_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling, write_report)
+                               use_density_scaling, write_case_scene, write_report)
 
 import math
 from fdem.mesh.topology import INTACT
@@ -46,7 +46,7 @@ from fdem.io.jsonable import write_json
 
 __all__ = ["four_slope_property_sets", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
-           "ground_surface", "simulation", "main", "YOUNG", "POISSON", "DENSITY"]
+           "ground_surface", "simulation", "scene", "main", "YOUNG", "POISSON", "DENSITY"]
 
 
 def four_slope_property_sets() -> dict[int, CrackProperties]:
@@ -184,6 +184,40 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     return sim, cracks
 
 
+def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
+          joint_offset: float | None = None, workflow=None) -> dict:
+    """One of the four slopes as a scene file's contents (``fdem run four-slopes --write-scene
+    FILE``): the outline, brick fabric, rock, the paper's crack table, contact, supports and
+    ``workflow`` (a :class:`fdem.workflow.slope.SlopeWorkflow`) of :func:`build` and
+    :func:`simulation`, so that ``fdem run FILE`` runs the same model."""
+    import dataclasses
+
+    geo = four_slope_geometry(angle, spacing, joint_offset=joint_offset)
+    fabric = geo.joint_sets[0]
+    H = FOUR_SLOPE_HEIGHT
+    cracks = {str(tag): {k: v for k, v in dataclasses.asdict(p).items() if v is not None}
+              for tag, p in four_slope_property_sets().items()}
+    wf = {}
+    if workflow is not None:
+        wf = {"reduction": workflow.reduction, "fos": list(workflow.fos) if workflow.fos else None,
+              "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction}
+    return {
+        "scene": {"name": f"four-slopes-{angle}-{spacing}", "size": size, "refine_near_joints": refine,
+                  "description": f"the {angle}-angle {spacing} slope of the four-slope paper (docs/cases.md A)",
+                  "min_joint_length": geo.min_joint_length},
+        "slope": {"kind": "simple", "height": H, "face_angle": FOUR_SLOPE_FACE_ANGLE, "crest_length": 2 * H,
+                  "toe_length": 3 * H, "base_depth": H},
+        "joints": [{"kind": "brick", "name": fabric.name, "dip": fabric.dip, "spacing": fabric.spacing,
+                    "offset": fabric.offset}],
+        "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY},
+        "cracks": cracks,
+        "contact": {"penalty": CONTACT_PENALTY, "friction_angle": 30.0},
+        "supports": {"bottom": "fixed", "left": "fix-x", "right": "fix-x"},
+        "gravity": {"g": GRAVITY},
+        "workflow": {"kind": "strength-reduction", **wf},
+    }
+
+
 def main(argv=None) -> dict:
     parser = case_parser(__doc__, name=NAME, out="runs/four_slopes", size=SIZE,
                          size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
@@ -204,11 +238,11 @@ def main(argv=None) -> dict:
     parser.add_argument("--max-steps", type=int, default=None, choices=[0],
                         help="0: mesh and pictures only (stages end by physics, not by step counts: "
                              "--max-time caps the simulated time)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--rigid-blocks", action="store_true",
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
     add_resume_options(parser)
+    add_write_scene_option(parser)
     args = prepare_run(parser, parser.parse_args(argv), argv, NAME, open_now=False)
     check_common(parser, args)
     if not 0.0 < args.runout_dt_fraction <= 1.0:
@@ -231,6 +265,9 @@ def main(argv=None) -> dict:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
     except ValueError:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
+    if args.write_scene is not None:
+        return write_case_scene(parser, NAME, scene(args.angle, spacing, args.size, args.refine, args.joint_offset,
+                                                    workflow), args.write_scene, argv)
 
     from fdem.geometry.polygons import slope_toe
     from fdem.solve.checkpoint import save_checkpoint

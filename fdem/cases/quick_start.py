@@ -37,13 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, check_mesh_size,
+from fdem.cases.common import (add_resume_options, add_write_scene_option, cap_simulated_time, case_parser, check_common, check_mesh_size,
                                finish_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling, write_report)
+                               use_density_scaling, write_case_scene, write_report)
 
 __all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
-           "FOS_BRACKET", "geometry", "property_sets", "build", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
+           "FOS_BRACKET", "geometry", "property_sets", "build", "scene", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
 
 NAME = "quick-start"
 HEIGHT, FACE_ANGLE = 10.0, 60.0                 # slope height [m], face angle [deg]
@@ -117,17 +117,46 @@ def build(size: float = SIZE, out_dir: Path | None = None, pictures: bool = Fals
     return geo, sim, cracks, start
 
 
+def scene(size: float = SIZE, fos: bool = False) -> dict:
+    """This case as a scene file's contents (``fdem run quick-start --write-scene FILE``): the
+    same outline, joints, rock, crack elements, contact, supports and workflow as :func:`build`,
+    so that ``fdem run FILE`` runs the same model."""
+    import dataclasses
+
+    a = math.radians(JOINT_DIP)
+    cracks = {str(tag): {k: v for k, v in dataclasses.asdict(p).items() if v is not None}
+              for tag, p in property_sets().items()}
+    return {
+        "scene": {"name": NAME, "description": "the quick-start slope (fdem demo)", "size": size,
+                  "min_joint_length": MIN_JOINT_LENGTH},
+        "slope": {"kind": "simple", "height": HEIGHT, "face_angle": FACE_ANGLE, "crest_length": CREST_LENGTH,
+                  "toe_length": TOE_LENGTH, "base_depth": BASE_DEPTH},
+        "joints": [{"kind": "brick", "name": "bedding + cross joints", "dip": JOINT_DIP, "spacing": JOINT_SPACING,
+                    "offset": -math.sin(a) * TOE_LENGTH + math.cos(a) * BASE_DEPTH}],
+        "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY, "damping": ELEMENT_DAMPING},
+        "cracks": cracks,
+        "contact": {"penalty": PENALTY, "friction_angle": 28.0, "damping_ratio": CONTACT_DAMPING},
+        "supports": {"bottom": "fixed", "left": "fix-x", "right": "fix-x"},
+        "gravity": {"g": GRAVITY},
+        "workflow": {"kind": "strength-reduction", "fos": list(FOS_BRACKET) if fos else None},
+    }
+
+
 def main(argv=None) -> dict:
     parser = case_parser(__doc__, name=NAME, out="runs/quick_start", size=SIZE, size_help=f"element size [m] (default {SIZE})")
     parser.add_argument("--fos", action="store_true",
                         help=f"search the factor of safety by bisection first (bracket {FOS_BRACKET[:2]}, "
                              f"tolerance {FOS_BRACKET[2]}; about 6 more damped trials)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--rigid-blocks", action="store_true",
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
     add_resume_options(parser)
-    args = prepare_run(parser, parser.parse_args(argv), argv, NAME)
+    add_write_scene_option(parser)
+    args = parser.parse_args(argv)
+    if args.write_scene is not None:
+        check_common(parser, args)
+        return write_case_scene(parser, NAME, scene(args.size, args.fos), args.write_scene, argv or [])
+    args = prepare_run(parser, args, argv, NAME)
     check_common(parser, args)
     set_threads(args.threads)
     if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows

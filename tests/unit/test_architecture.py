@@ -20,7 +20,7 @@ LAYERS = {  # subpackage (or top-level module) -> floor
     "solve": 5, "blocks": 5,
     "results": 6,
     "workflow": 7,
-    "cases": 8,
+    "cases": 8, "scene": 8,
     "cli": 9, "__main__": 9, "": 9,
 }
 

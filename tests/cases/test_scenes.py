@@ -1,0 +1,292 @@
+"""Scene files: a slope written in TOML runs with ``fdem run FILE``; a built-in case's written
+scene runs the same model bit for bit; a user's Gmsh mesh with named physical groups carries
+its supports and joints; a bad file is refused before any work, naming the file, the section
+and the key.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdem.scene.schema import SceneError, check_scene, read_scene
+from fdem.scene.write import scene_text
+
+SMALL_SLOPE = """
+[scene]
+name = "my-slope"
+size = 2.0
+
+[slope]
+kind = "simple"
+height = 10.0
+face_angle = 60.0
+crest_length = 8.0
+toe_length = 16.0
+base_depth = 3.0
+
+[[joints]]
+kind = "persistent"
+dip = 30.0
+spacing = 3.0
+through_toe = 0.0
+
+[rock]
+young = 0.5e9
+poisson = 0.25
+density = 2600.0
+damping = 0.1
+
+[cracks.0]
+f_t = 2e5
+c = 5e5
+phi = 35.0
+G_I = 500.0
+G_II = 5000.0
+p_n = 0.5e9
+
+[cracks.1]
+f_t = 5e4
+c = 1e5
+phi = 30.0
+G_I = 50.0
+G_II = 500.0
+p_n = 0.5e9
+
+[contact]
+penalty = 0.5e9
+friction_angle = 30.0
+
+[supports]
+bottom = "fixed"
+left = "fix-x"
+right = "fix-x"
+"""
+
+
+def fdem(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fdem", *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=cwd)
+
+
+def scene_dict(text: str) -> dict:
+    import tomllib
+
+    return tomllib.loads(text)
+
+
+# ----------------------------------------------------------------------------- refusals
+@pytest.mark.parametrize("edit, words", [
+    (lambda s: s["rock"].update(young=-5e9), ["[rock] young", "must be > 0", "Young's modulus"]),
+    (lambda s: s["rock"].update(yung=5e9), ["[rock]", "unknown key(s) yung"]),
+    (lambda s: s.update(rocks={}), ["unknown section(s) [rocks]"]),
+    (lambda s: s["cracks"].pop("1"), ["no crack property set for tag(s) [1]"]),
+    (lambda s: s["cracks"].update({"2": dict(s["cracks"]["1"])}), ["[cracks.2]", "no joint set"]),
+    (lambda s: s["joints"][0].pop("spacing"), ["[[joints]] #1", "needs spacing"]),
+    (lambda s: s["joints"][0].update(dip=200.0), ["[[joints]] #1", "dip", "[0, 180)"]),
+    (lambda s: s["slope"].update(face_angle=95.0), ["[slope] face_angle", "(0, 90]"]),
+    (lambda s: s["supports"].update(bottom="clamped"), ["[supports] bottom", "'fixed'"]),
+    (lambda s: s["rock"].update(poisson="0.25"), ["[rock] poisson", "finite number"]),
+    (lambda s: s["cracks"]["1"].update(p_t=1e9, k_t=1e9), ["[cracks]", "at most one of p_t"]),
+    (lambda s: s["workflow"].update(fos=[2.0, 1.0, 0.1]), ["[workflow]"]),
+])
+def test_a_bad_scene_is_refused_naming_file_section_and_key(edit, words):
+    raw = scene_dict(SMALL_SLOPE)
+    raw.setdefault("workflow", {})
+    edit(raw)
+    with pytest.raises(SceneError) as err:
+        check_scene(raw, Path("my_slope.toml"))
+    message = str(err.value)
+    assert message.startswith("my_slope.toml: ")
+    for w in words:
+        assert w.lower() in message.lower(), message
+
+
+def test_a_crack_law_that_snaps_back_on_the_mesh_is_refused_before_the_static_start(tmp_path):
+    """Snap-back depends on each element's length, so it is checked on the mesh (seconds), before
+    the static solve, naming the property set, the energy needed and the way out."""
+    from fdem.mesh.topology import build_topology
+    from fdem.scene.build import build_simulation, scene_mesh
+
+    scene = read_scene(_write(tmp_path, SMALL_SLOPE.replace("G_I = 50.0", "G_I = 0.001")))
+    topo = build_topology(scene_mesh(scene)[1])
+    with pytest.raises(SceneError, match=r"my_slope.toml: \[cracks\]: property set 1 .*G_I = 0.001 .*snap back"):
+        build_simulation(scene, topo, None, pictures=False, progress=False, where="my_slope.toml")
+
+
+def test_a_bad_scene_file_exits_2_before_any_work(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(SMALL_SLOPE.replace("poisson = 0.25", "poisson = 0.7"))
+    run = fdem("run", str(path), "--out", str(tmp_path / "out"))
+    assert run.returncode == 2
+    assert "bad.toml: [rock] poisson = 0.7: must be in [0, 0.5)" in run.stderr
+    assert not (tmp_path / "out").exists()  # nothing was started: no folder, no run.json
+
+
+def test_written_scene_reads_back_to_the_same_scene(tmp_path):
+    """The writer's text is TOML that checks to the same scene, floats exact (``repr``)."""
+    scene = read_scene(_write(tmp_path, SMALL_SLOPE.replace("size = 2.0", "size = 0.1 # or 1/3\nmin_joint_length = 0.3333333333333333")))
+    again = check_scene(scene_dict(scene_text(_rawable(scene))), tmp_path / "scene.toml")
+    assert again == scene
+
+
+# ----------------------------------------------------------------------------- runs
+def test_a_scene_file_runs_and_starts_in_static_equilibrium(tmp_path):
+    """``fdem run FILE`` in a subprocess: the summary names the scene, the mesh has the joint set
+    (its crack elements tagged 1), and the static start holds: after 0.05 s of damped
+    equilibrium the largest displacement is a small fraction of the element size."""
+    path = _write(tmp_path, SMALL_SLOPE)
+    out = tmp_path / "run"
+    run = fdem("run", str(path), "--out", str(out), "--max-time", "0.05", "--no-pictures", "--quiet",
+               "--threads", "1")
+    assert run.returncode == 0, run.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["case"] == "scene" and summary["scene"] == "my-slope"
+    assert summary["workflow"]["stages"][0]["name"] == "equilibrium"
+    assert summary["runout"]["max_displacement_m"] < 0.01 * 2.0
+    assert (out / "scene.toml").is_file() and read_scene(out / "scene.toml")["scene"]["name"] == "my-slope"
+    record = json.loads((out / "run.json").read_text())
+    assert record["case"] == "scene" and record["exit_code"] == 0
+
+
+def test_a_cases_written_scene_runs_the_same_model(tmp_path):
+    """``fdem run quick-start --write-scene FILE`` then ``fdem run FILE``: the same mesh, model
+    and workflow, so the same history bit for bit (equilibrium at F = 1 and the first reduction
+    steps, 0.6 s of simulated time at 2 m elements)."""
+    from fdem.cases import quick_start, scene
+
+    args = ["--size", "2.0", "--max-time", "0.6", "--no-pictures", "--quiet", "--threads", "1"]
+    written = quick_start.main(["--size", "2.0", "--write-scene", str(tmp_path / "qs.toml")])
+    assert written["outcome"] == "scene written"
+    a = quick_start.main(args + ["--out", str(tmp_path / "case")])
+    b = scene.main([str(tmp_path / "qs.toml")] + args[2:] + ["--out", str(tmp_path / "scene")])
+    assert b["n_triangles"] == a["workflow"]["stages"][0].get("n_triangles", b["n_triangles"])
+    assert (tmp_path / "case" / "history.csv").read_bytes() == (tmp_path / "scene" / "history.csv").read_bytes()
+    assert a["cracks"] == b["cracks"]
+
+
+def test_four_slopes_writes_a_scene_that_checks(tmp_path):
+    from fdem.cases import four_slopes
+
+    path = tmp_path / "fs.toml"
+    four_slopes.main(["--angle", "high", "--spacing", "coarse", "--size", "1.0", "--fos", "1.0", "2.0", "0.1",
+                      "--write-scene", str(path)])
+    scene = read_scene(path)
+    assert scene["joints"][0]["dip"] == 115.0 and scene["joints"][0]["spacing"] == 5.0
+    assert scene["workflow"]["fos"] == [1.0, 2.0, 0.1]
+    assert scene["cracks"][1]["k_t"] == 917e9  # the paper's tangential stiffness, not a penalty
+
+
+# ----------------------------------------------------------------------------- a user's mesh
+def _user_mesh(path: Path, size: float = 1.5) -> None:
+    """A slope meshed by Gmsh's own API with the user's group names: ``base`` and ``sides``
+    (curves), ``bedding`` (a joint curve embedded in the rock), ``rock`` (the surface)."""
+    import gmsh
+
+    gmsh.initialize(["-v", "0"])
+    try:
+        gmsh.model.add("user")
+        g = gmsh.model.geo
+        pts = [(0, 0), (24, 0), (24, 13), (16, 13), (10, 3), (0, 3)]
+        p = [g.addPoint(x, y, 0, size) for x, y in pts]
+        lines = [g.addLine(p[i], p[(i + 1) % len(p)]) for i in range(len(p))]
+        loop = g.addCurveLoop(lines)
+        surface = g.addPlaneSurface([loop])
+        a, b = g.addPoint(12, 4, 0, size), g.addPoint(22, 8, 0, size)
+        joint = g.addLine(a, b)
+        g.synchronize()
+        gmsh.model.mesh.embed(1, [joint], 2, surface)
+        gmsh.model.addPhysicalGroup(1, [lines[0]], name="base")
+        gmsh.model.addPhysicalGroup(1, [lines[1], lines[5]], name="sides")
+        gmsh.model.addPhysicalGroup(1, [joint], name="bedding")
+        gmsh.model.addPhysicalGroup(2, [surface], name="rock")
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+def test_a_users_gmsh_mesh_carries_its_supports_and_joints(tmp_path):
+    from fdem.mesh.mesh import Mesh
+    from fdem.mesh.topology import build_topology
+    from fdem.scene.build import build_simulation, scene_mesh
+
+    _user_mesh(tmp_path / "user.msh")
+    text = SMALL_SLOPE.split("[[joints]]")[0].split("[slope]")[0] + "[rock]" + SMALL_SLOPE.split("[rock]")[1]
+    text = text.replace('left = "fix-x"\nright = "fix-x"', 'sides = "fix-x"').replace('bottom = "fixed"',
+                                                                                      'base = "fixed"')
+    text = text.replace('[scene]\nname = "my-slope"\nsize = 2.0',
+                        '[scene]\nname = "my-slope"\nsize = 1.5\nmesh = "user.msh"')
+    text += '\n[mesh]\njoints = { bedding = 1 }\ntoe = [10.0, 3.0]\n'
+    scene = read_scene(_write(tmp_path, text))
+    _, mesh = scene_mesh(scene)
+    raw = Mesh.load(tmp_path / "user.msh")
+    bedding_edges = int((raw.line_group == raw.group_names.index("bedding")).sum())
+    topo = build_topology(mesh)
+    assert bedding_edges > 0 and int((topo.crack_tag == 1).sum()) == bedding_edges
+    sim, cracks, start = build_simulation(scene, topo, None, pictures=False, progress=False)
+    base, sides = topo.nodes_in_group("base"), topo.nodes_in_group("sides")
+    x0 = topo.x0
+    assert np.allclose(x0[base, 1], 0.0) and np.all((np.isclose(x0[sides, 0], 0) | np.isclose(x0[sides, 0], 24)))
+    # the static start holds the slope: a few hundred damped steps move nothing measurable
+    from fdem.solve.damping import Damping
+
+    sim.run(n_steps=300, damping=Damping.quasi_static())
+    assert np.abs(sim.state.x - x0).max() < 1e-3
+
+
+def test_the_command_line_runs_a_scene_on_a_users_mesh(tmp_path):
+    """``--mesh`` replaces the outline and joints: without a joint mapping the scene's joint
+    tags are refused (exit 2, naming the tag); with ``[mesh] joints`` and the mesh's group names
+    in ``[supports]`` it runs, on the mesh's own triangles."""
+    from fdem.mesh.mesh import Mesh
+
+    _user_mesh(tmp_path / "user.msh")
+    opts = ["--out", str(tmp_path / "out"), "--max-time", "0.01", "--no-pictures", "--quiet", "--threads", "1"]
+    refused = fdem("run", str(_write(tmp_path, SMALL_SLOPE)), "--mesh", str(tmp_path / "user.msh"), *opts)
+    assert refused.returncode == 2 and "[cracks.1] names a tag no joint set has" in refused.stderr
+    text = (SMALL_SLOPE.replace('left = "fix-x"\nright = "fix-x"', 'sides = "fix-x"')
+            .replace('bottom = "fixed"', 'base = "fixed"') + '\n[mesh]\njoints = { bedding = 1 }\ntoe = [10.0, 3.0]\n')
+    run = fdem("run", str(_write(tmp_path, text, "mapped.toml")), "--mesh", str(tmp_path / "user.msh"), *opts)
+    assert run.returncode == 0, run.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["n_triangles"] == Mesh.load(tmp_path / "user.msh").n_triangles
+    assert summary["toe"] == [10.0, 3.0]
+
+
+# ----------------------------------------------------------------------------- helpers
+def _write(folder: Path, text: str, name: str = "my_slope.toml") -> Path:
+    path = folder / name
+    path.write_text(text)
+    return path
+
+
+def _rawable(scene: dict) -> dict:
+    """A checked scene as a TOML file holds it (tags as strings, ``None`` left out)."""
+    out = {}
+    for k, v in scene.items():
+        if isinstance(v, dict):
+            out[k] = {str(t): ({a: b for a, b in x.items() if b is not None} if isinstance(x, dict) else x)
+                      for t, x in v.items() if x is not None}
+        elif isinstance(v, list):
+            out[k] = [{a: b for a, b in x.items() if b is not None} for x in v]
+    return {k: v for k, v in out.items() if v}
+
+
+
+def test_the_guide_shows_the_schema_and_the_example_as_they_are():
+    """``docs/scenes.md`` holds the key tables generated from the schema and the example file
+    verbatim, so the guide cannot drift from the code."""
+    from fdem.scene.schema import schema_markdown
+
+    root = Path(__file__).resolve().parents[2]
+    doc = (root / "docs" / "scenes.md").read_text()
+    table = doc.split("<!-- schema:start -->\n")[1].split("<!-- schema:end -->")[0]
+    assert table == schema_markdown()
+    example = (root / "cases" / "scenes" / "jointed_slope.toml").read_text()
+    assert f"```toml\n{example}```" in doc
+    read_scene(root / "cases" / "scenes" / "jointed_slope.toml")  # and the example checks
