@@ -149,6 +149,13 @@ def check_command(tokens: list[str]) -> str | None:
         args = tokens[1:]
         if args[:1] == ["demo"]:
             return parse_case_options("quick-start", args[1:])
+        if args[:1] == ["run"] and len(args) > 1 and args[1].endswith(".toml"):
+            # a scene file: the one in the repository must check; a user's own (my_slope.toml) is a name
+            if (ROOT / args[1]).is_file():
+                from fdem.scene.schema import read_scene
+
+                read_scene(ROOT / args[1])
+            return parse_case_options("scene", args[1:])
         if args[:1] == ["run"]:
             assert len(args) > 1, "fdem run needs a case name"
             assert args[1].replace("_", "-") in CASES, f"fdem run {args[1]}: no such case ({', '.join(CASES)})"
