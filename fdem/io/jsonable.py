@@ -14,6 +14,7 @@ Two rules, so that results are never lost to an encoder after hours of work:
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -63,10 +64,15 @@ def write_json(path, obj, indent: int | None = 2) -> Path:
     try:
         tmp.write_text(text)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         try:
             tmp.unlink()
         except OSError:
             pass
+        if isinstance(err, OSError) and err.errno == errno.ENOSPC and path.is_file():
+            # a full disk has no room for the temporary copy; rewritten in place, a small file
+            # reuses its own blocks (a run's run.json after a full disk ended it)
+            path.write_text(text)
+            return path
         raise
     return path

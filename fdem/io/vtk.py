@@ -212,11 +212,17 @@ def write_vtu(path: str | os.PathLike, points: np.ndarray, cells: np.ndarray, ce
     head = re.sub("\x00([0-9]+)\x00", lambda m: str(offsets[int(m.group(1))]), "\n".join(xml)).encode() + b"\n_"
     tail = b"\n</AppendedData>\n</VTKFile>\n"
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as fh:
-        fh.write(head)
-        for b in reversed(blocks):
-            fh.write(b)
-        fh.write(tail)
+    try:
+        with open(path, "wb") as fh:
+            fh.write(head)
+            for b in reversed(blocks):
+                fh.write(b)
+            fh.write(tail)
+    except BaseException:
+        # a part of a frame reads as nothing, and on a full disk its bytes are what the run's
+        # summary and checkpoint need: remove it
+        path.unlink(missing_ok=True)
+        raise
     return path
 
 
