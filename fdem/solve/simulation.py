@@ -976,7 +976,8 @@ class Simulation:
                 "slip": (gap * t).sum(1)}
 
     def write_output(self) -> None:
-        """Write one output frame (triangles VTU, crack VTU, optional PNG) of the current state."""
+        """Write one output frame of the current state: triangles VTU, crack VTU (with crack
+        elements), contact VTU (with a contact set), optional PNG (``docs/outputs.md``)."""
         if self.out_dir is None:
             self._frames += 1
             return

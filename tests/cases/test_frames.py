@@ -266,3 +266,25 @@ def test_contact_frame_lines_carry_the_pair_forces(tmp_path):
 
     frames = read_pvd(tmp_path / "blocks_contacts.pvd")
     assert len(frames) == 2 and pv.read(str(frames[-1][1])).n_cells == 0
+
+
+def test_vtk_warps_the_frame_back_to_the_reference_by_its_displacement(tmp_path):
+    """The displacement is a 3-component vector VTK takes as such: ParaView's Warp By Vector
+    (``vtkWarpVector``) with scale -1 puts the frame's current points back on the reference
+    positions (to float32 precision). VTK takes only 3-component arrays as vectors
+    (``docs/outputs.md``), hence the zero third component."""
+    import pyvista as pv
+    import vtk
+
+    sim, cs, separate = crack_sim(tmp_path)
+    sim.state.x[:] = sim.x0 + 1e-3 * np.random.default_rng(5).standard_normal(sim.x0.shape)
+    sim.write_output()
+    _, grid, _ = last_frame(tmp_path, "pair")
+    warp = vtk.vtkWarpVector()
+    warp.SetInputData(grid)
+    warp.SetInputArrayToProcess(0, 0, 0, 0, "displacement")
+    warp.SetScaleFactor(-1.0)
+    warp.Update()
+    back = np.asarray(pv.wrap(warp.GetOutput()).points)
+    np.testing.assert_allclose(back[:, :2], sim.x0, atol=1e-6)
+    assert grid.point_data["displacement"].shape[1] == 3
