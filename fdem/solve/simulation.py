@@ -1009,8 +1009,8 @@ class Simulation:
         return self._contact_series
 
     def _write_contact_frame(self) -> None:
-        """One frame of contact force lines; with no touching pair a frame of zero cells (a few
-        hundred bytes), so the series keeps one frame per output time."""
+        """One frame of contact force lines; with no touching pair a frame of zero cells (about
+        1 kB), so the series keeps one frame per output time."""
         g = self.contact_geometry()
         k = len(g["normal_force"])
         lines = np.arange(2 * k, dtype=np.int64).reshape(-1, 2)
