@@ -614,10 +614,11 @@ def unbalanced_ratio_floor(sim) -> float:
     float64 numbers at its coordinates (``numpy.spacing``). Positions are stored to that spacing,
     so each force is known only to about ``S eps``; the ratio cannot fall much below ``R_eps``
     however long a stage runs. It grows as the mesh refines (the crack penalties per node grow
-    against the node's weight): 6.4e-6 on the four-slope scene at size 1.0, 1.0e-5 at 0.5 and
-    ``docs/benchmarks.md`` "Equilibrium stage at scale" for 180k triangles, where the ratio
-    measured at rest sits 2.6-2.9 times above it (1.64e-5 at size 1.0; 4.3e-4 with the same
-    model moved 1000 m from the origin, where positions are 20 times coarser)."""
+    against the node's weight, about as ``1 / dt^2``): on the four-slope scene 6.4e-6 at size
+    1.0, 1.03e-5 at 0.5, 1.58e-5 at 0.35, 3.3e-5 at 0.18 (180k triangles). The ratio measured at
+    rest sits 1.3 to 5 times above it: 1.64e-5 at size 1.0, 4.3e-4 with the same model moved
+    1000 m from the origin (positions 20 times coarser), 1.66e-4 at 180k (``docs/benchmarks.md``,
+    "Equilibrium stage at scale")."""
     mass = sim.state.mass
     tri = getattr(sim, "_triangle_stiffness", None)
     s = nodal_stiffness(sim.model, sim.providers, mass, tri)
