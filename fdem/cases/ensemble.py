@@ -164,7 +164,10 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
     validates ``--n``, ``--seed``, ``--method`` and ``--max-time``)."""
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/ensemble"))
-    parser.add_argument("--n", type=int, default=20, help="realizations")
+    parser.add_argument("--scene", type=Path, default=None, metavar="FILE",
+                        help="vary a scene file instead of the planar slope: its [ensemble] table names the keys "
+                             "and their distributions (docs/scenes.md, Ensembles)")
+    parser.add_argument("--n", type=int, default=None, help="realizations (default 20, or the scene's)")
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (one Numba thread each)")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (default: local)")
@@ -172,9 +175,9 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
                        help="the file a running Dask scheduler wrote (dask scheduler --scheduler-file PATH): "
                             "a cluster started by a batch system or dask-jobqueue")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for --scheduler")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--method", choices=("lhs", "mc"), default="lhs")
-    parser.add_argument("--size", type=float, default=2.0, help="mesh size [m]")
+    parser.add_argument("--seed", type=int, default=None, help="sampling seed (default 0, or the scene's)")
+    parser.add_argument("--method", choices=("lhs", "mc"), default=None, help="default lhs, or the scene's")
+    parser.add_argument("--size", type=float, default=None, help="mesh size [m] of the planar slope (default 2)")
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each trial's simulated time [s] (a smoke run: realizations end below_bracket)")
     parser.add_argument("--no-pictures", action="store_true", help="no PNG pictures")
@@ -188,14 +191,22 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
             check_scheduler_file(args.scheduler_file)
         except (OSError, ValueError) as err:
             parser.error(f"--scheduler-file: {err}")
-    if not (math.isfinite(args.size) and args.size > 0):
+    if args.scene is not None and args.size is not None:
+        parser.error("--size: a scene's element size is its [scene] size")
+    if args.size is not None and not (math.isfinite(args.size) and args.size > 0):
         parser.error(f"--size must be a positive number of metres, got {args.size}")
     if args.workers < 1:
         parser.error(f"--workers must be at least 1, got {args.workers}")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         parser.error(f"--timeout must be a positive number of seconds, got {args.timeout}")
     try:
-        ens = ensemble(args.n, args.seed, args.method, args.size, max_time=args.max_time)
+        if args.scene is not None:
+            from fdem.scene.ensemble import scene_ensemble
+
+            ens = scene_ensemble(args.scene, args.n, args.seed, args.method, max_time=args.max_time)
+        else:
+            ens = ensemble(20 if args.n is None else args.n, 0 if args.seed is None else args.seed,
+                           args.method or "lhs", 2.0 if args.size is None else args.size, max_time=args.max_time)
     except ValueError as err:
         parser.error(str(err))
     if args.no_pictures:
@@ -212,9 +223,9 @@ def main(argv=None) -> dict:
     remote = args.scheduler is not None or args.scheduler_file is not None
     timing = {"workers": None if remote else args.workers, "scheduler": args.scheduler,
               "scheduler_file": None if args.scheduler_file is None else str(args.scheduler_file),
-              "n": args.n, "n_run": run.n_run, "n_skipped": run.n_skipped, "wall_seconds": run.wall_seconds,
+              "n": ens.n, "n_run": run.n_run, "n_skipped": run.n_skipped, "wall_seconds": run.wall_seconds,
               "load_average_before": load, "load_average_after": os.getloadavg(), "cpu_count": os.cpu_count(),
-              "size_m": args.size, "date": time.strftime("%Y-%m-%d %H:%M")}
+              "size_m": (2.0 if args.size is None else args.size) if args.scene is None else None, "scene": None if args.scene is None else str(args.scene), "date": time.strftime("%Y-%m-%d %H:%M")}
     write_json(args.out / "timing.json", timing, indent=1)
     pf = summary["probability_of_failure"]
     print(f"{run.n_run} realizations run, {run.n_skipped} already in {run.table}, {run.wall_seconds:.1f} s; "

@@ -182,6 +182,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "x": _f("x of the point [m] (reference configuration)", required=True),
         "y": _f("y of the point [m]", required=True),
     },
+    "ensemble": {},  # checked by fdem.scene.ensemble when `fdem run ensemble --scene FILE` runs it
     "outputs": {
         "pictures": Key("bool", "write the PNG pictures", default=True),
         "toe": Key("floats", "[x, y] of the toe for the runout figures [m] (default: from the outline)", length=2),
@@ -192,6 +193,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
 ARRAYS = ("joints", "monitors")       # [[section]]: a list of tables
 BY_TAG = ("cracks",)                  # [section.<tag>]: tables keyed by an integer tag
 FREE_KEYS = ("supports",)             # {name = value}: keys are the user's group names
+OWN_CHECK = ("ensemble",)             # checked by its own module (fdem.scene.ensemble), kept as given
 REQUIRED_SECTIONS = ("scene", "rock", "cracks", "contact")
 
 _JOINT_KEYS = {
@@ -261,6 +263,10 @@ def check_scene(raw: dict, path: str | Path = "<scene>") -> dict:
             out[section] = _check_by_tag(value, keys, where, section)
         elif section in FREE_KEYS:
             out[section] = _check_supports(value if value is not None else {}, where)
+        elif section in OWN_CHECK:
+            if value is not None and not isinstance(value, dict):
+                raise SceneError(f"{where}: {section} must be a table [{section}]")
+            out[section] = value
         else:
             if value is not None and not isinstance(value, dict):
                 raise SceneError(f"{where}: {section} must be a table [{section}], got {value!r}")
@@ -496,10 +502,16 @@ def schema_markdown() -> str:
     heads = {"joints": "[[joints]] (one table per joint set; set j is tag j)",
              "cracks": "[cracks.TAG] (0 intact rock bridges, j joint set j)",
              "monitors": "[[monitors]] (one table per point history)",
-             "supports": "[supports]"}
+             "supports": "[supports]", "ensemble": "[ensemble]"}
     out = []
     for section, keys in SCHEMA.items():
         out.append(f"#### {heads.get(section, f'[{section}]')}\n")
+        if section == "ensemble":
+            out.append("Read only by `fdem run ensemble --scene FILE`: `n`, `seed`, `method` (`lhs`, `mc`), "
+                       "`fos` ([lower, upper, tolerance]), `runout` (true: run the workflow after the search) "
+                       "and the table `[ensemble.vary]` of dotted paths and distributions (section Ensembles "
+                       "above).\n")
+            continue
         if section == "supports":
             out.append("One line per boundary group: `group = \"kind\"` with kind one of "
                        + ", ".join(f"`{k}`" for k in SUPPORT_KINDS) + " (`fix-x` holds the x displacement: a "

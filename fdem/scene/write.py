@@ -14,7 +14,7 @@ import os
 import re
 from pathlib import Path
 
-from fdem.scene.schema import ARRAYS, BY_TAG, FREE_KEYS, SCHEMA
+from fdem.scene.schema import ARRAYS, BY_TAG, FREE_KEYS, OWN_CHECK, SCHEMA
 
 __all__ = ["scene_text", "write_scene"]
 
@@ -75,6 +75,8 @@ def scene_text(scene: dict, title: str | None = None) -> str:
         elif section in BY_TAG:
             for tag, table in value.items():
                 _table(lines, f"[{section}.{tag}]", table, section)
+        elif section in OWN_CHECK:  # its own keys, nested tables inline
+            _table(lines, f"[{section}]", value, section)
         elif section in FREE_KEYS:
             lines.append(f"[{section}]")
             lines += [f"{_key(k)} = {_value(v)}" for k, v in value.items()]

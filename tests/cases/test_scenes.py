@@ -6,6 +6,7 @@ and the key.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -290,3 +291,48 @@ def test_the_guide_shows_the_schema_and_the_example_as_they_are():
     example = (root / "cases" / "scenes" / "jointed_slope.toml").read_text()
     assert f"```toml\n{example}```" in doc
     read_scene(root / "cases" / "scenes" / "jointed_slope.toml")  # and the example checks
+
+
+# ----------------------------------------------------------------------------- ensembles of a scene
+ENSEMBLE = '''
+[ensemble]
+n = 4
+seed = 3
+fos = [0.5, 3.0, 0.2]
+
+[ensemble.vary]
+"cracks.1.phi" = ["normal", 30.0, 4.0, 20.0, 40.0]
+"joints.1.through_toe" = ["uniform", 0.0, 0.5]
+"heterogeneity.seed" = ["seed"]
+'''
+
+
+def test_an_ensemble_varies_the_scene_keys_it_names(tmp_path):
+    """``[ensemble.vary]`` paths reach the scene's keys: every realization's scene holds its
+    sampled values; sampling is reproducible; bad paths and distributions are refused naming
+    them; and the factor of safety of a realization rises with its joints' friction."""
+    from fdem.scene.ensemble import scene_ensemble
+    from fdem.workflow.ensembles import realize
+
+    weak = SMALL_SLOPE.replace("f_t = 5e4\nc = 1e5", "f_t = 5e3\nc = 1e4")  # joints that can fail
+    path = _write(tmp_path, weak + ENSEMBLE)
+    ens = scene_ensemble(path)
+    rows = ens.sample()
+    assert ens.n == 4 and rows == scene_ensemble(path).sample()
+    assert set(rows[0]) == {"cracks_1_phi", "joints_1_through_toe", "heterogeneity_seed"}
+    for row in rows:
+        s = ens.scene.scene(**row)
+        assert s["cracks"][1]["phi"] == row["cracks_1_phi"] and 20.0 <= row["cracks_1_phi"] <= 40.0
+        assert s["joints"][0]["through_toe"] == row["joints_1_through_toe"]
+        assert s["heterogeneity"]["seed"] == row["heterogeneity_seed"]
+    for bad, words in ((('"cracks.3.phi"', '"cracks.1.phi"'), "no [cracks.3]"),
+                       (('"joints.2.through_toe"', '"joints.1.through_toe"'), "1 [[joints]] table"),
+                       (('"rock.colour"', '"cracks.1.phi"'), "no key 'colour'"),
+                       (('["seed"]', '["normal", 30.0, 4.0, 20.0, 40.0]'), "whole-number keys")):
+        text = SMALL_SLOPE + ENSEMBLE.replace(bad[1], bad[0], 1)
+        with pytest.raises(SceneError, match=re.escape(words)):
+            scene_ensemble(_write(tmp_path, text, "bad.toml"))
+    low = realize(ens, 0, {"cracks_1_phi": 20.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
+    high = realize(ens, 1, {"cracks_1_phi": 40.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
+    assert low["status"] == high["status"] == "ok", (low["error"], high["error"])
+    assert high["fos_lower"] >= low["fos_lower"] and high["fos"] > low["fos"]
