@@ -215,6 +215,11 @@ class RunReport:
                 written.append(pictures.geostatic_stress_map(out / "geostatic_stress.png", st.x, topo.triangles,
                                                              syy, ratio, outline=outline,
                                                              title=f"geostatic state ({label})"))
+        names = list(getattr(sim, "point_monitors", {}))
+        if names and sim.history:  # the point histories of the scene's [[monitors]] (or add_point_monitor)
+            from fdem.io.monitor_plots import monitor_plot
+
+            written.append(monitor_plot(out / "monitors.png", sim.history, names))
         if animate and sim.out_dir is not None:
             pvd = sim.out_dir / f"{sim.name}.pvd"
             crack_pvd = sim.out_dir / f"{sim.name}_cracks.pvd"

@@ -140,7 +140,7 @@ def test_a_scene_file_runs_and_starts_in_static_equilibrium(tmp_path):
     """``fdem run FILE`` in a subprocess: the summary names the scene, the mesh has the joint set
     (its crack elements tagged 1), and the static start holds: after 0.05 s of damped
     equilibrium the largest displacement is a small fraction of the element size."""
-    path = _write(tmp_path, SMALL_SLOPE)
+    path = _write(tmp_path, SMALL_SLOPE + '\n[[monitors]]\nname = "crest"\nx = 27.0\ny = 10.0\n')
     out = tmp_path / "run"
     run = fdem("run", str(path), "--out", str(out), "--max-time", "0.05", "--no-pictures", "--quiet",
                "--threads", "1")
@@ -149,6 +149,13 @@ def test_a_scene_file_runs_and_starts_in_static_equilibrium(tmp_path):
     assert summary["case"] == "scene" and summary["scene"] == "my-slope"
     assert summary["workflow"]["stages"][0]["name"] == "equilibrium"
     assert summary["runout"]["max_displacement_m"] < 0.01 * 2.0
+    # the point monitor 3 m below the crest: at rest, under about the weight of the rock above
+    from fdem.io.history import read_history
+
+    h = read_history(out / "history.csv")
+    assert np.all(np.abs(h["crest_uy"]) < 1e-3) and np.all(np.abs(h["crest_vy"]) < 1e-2)
+    weight = 2600.0 * 9.81 * 3.0
+    assert 0.6 * weight < -h["crest_syy"][-1] < 1.4 * weight, h["crest_syy"][-1]
     assert (out / "scene.toml").is_file() and read_scene(out / "scene.toml")["scene"]["name"] == "my-slope"
     record = json.loads((out / "run.json").read_text())
     assert record["case"] == "scene" and record["exit_code"] == 0
