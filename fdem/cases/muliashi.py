@@ -6,27 +6,21 @@ gravity is multiplied by a factor ``k`` (same statics as a density factor, real 
 dynamics) and the critical factor is found by the factor-of-safety search
 (:class:`fdem.workflow.fos.GravityIncrease`); the slope is then loaded past it and followed to rest.
 
-Crack-element properties from the macro properties (the paper's particle-scale table does not
-carry over to FDEM; every choice is a keyword of :func:`property_sets`):
+Crack-element properties (every choice is a keyword of :func:`property_sets`):
 
 * rock triangles: mudstone E = 5.96 GPa, nu = 0.15, rho = 2560 kg/m^3 (paper);
-* intact rock bridges (tag 0): ``f_t = UCS / 10 = 3.45 MPa`` (cases.md's starting point);
-  cohesion from the Mohr-Coulomb UCS with an assumed intact friction angle of 30 deg,
-  ``c = UCS (1 - sin phi) / (2 cos phi) = 9.96 MPa``; strengths normally distributed with a
-  coefficient of variation of 0.1, as the paper's bond strengths (23 +- 2.3 MPa). Fracture
-  energy: the mode-I toughness from the UCS correlation ``UCS = 88.7 K_IC`` (Whittaker, Singh &
-  Sun 1992) gives K_IC = 0.39 MPa m^0.5 and ``G_I = K_IC^2 (1 - nu^2) / E = 25 J/m^2``, a
-  process zone ``E G_I / f_t^2`` of 1.2 cm. Metre-size crack elements cannot carry that: with
-  the project's penalty ``p = 10 E`` the softening branch snaps back unless
-  ``G_I > f_t^2 L / (2 p)`` (up to 210 J/m^2 for 1.1 m elements at 1.4 f_t), and ``p = 60 E``
-  would cut the time step threefold. So ``G_I = 300 J/m^2`` (the smallest round value these
-  meshes admit; ``toughness_G_I()`` gives the K_IC value) and ``G_II = 10 G_I`` (the ratio of
-  the four-slope table): the rock bridges are tougher than the lab value, a known limit of
-  element-size FDEM at slope scale;
-* bedding joints (tag 1): c = 149.33 kPa and phi = 12.35 deg (paper); ``f_t = c / 10``;
-  ``G_II = c Zbar d`` with a cohesion softening slip ``d`` = 1 mm, ``G_I = f_t Zbar d``; a
-  dilation angle of 5 deg up to 5 mm of slip (the paper's smooth joints dilate, its value is
-  lost in the source);
+* intact rock bridges (tag 0): calibrated against the numerical compression test
+  (``docs/calibration.md``, :mod:`fdem.physics.calibration`): ``f_t = UCS / 10 = 3.45 MPa``,
+  phi = 30 deg, the cohesion that gives the paper's UCS = 34.5 MPa on the 8 m x 16 m specimen at
+  the element size used (:data:`BRIDGE_COHESION`, 11.8 MPa +- 3 % between sizes), and the
+  fracture energies of the size rule (:func:`fdem.physics.calibration.size_scaled_properties`,
+  ``G_I = 404.4 h`` J/m^2), which keep every element up to 1.5 h long from snapping back at 1.5
+  times the mean strength; strengths normally distributed with a coefficient of variation of
+  0.1, as the paper's bond strengths (23 +- 2.3 MPa);
+* bedding joints (tag 1): c = 149.33 kPa and phi = 12.35 deg (paper; the direct-shear scene
+  returns them exactly); ``f_t = c / 10``; ``G_II = c Zbar d`` with a cohesion softening slip
+  ``d`` = 1 mm, ``G_I = f_t Zbar d``; a dilation angle of 5 deg up to 5 mm of slip (the paper's
+  smooth joints dilate, its value is lost in the source);
 * penalties ``p_n = p_t = 10 E`` (Munjiza's alpha = 10, the tangential tied to the normal).
 
     python cases/muliashi.py --out runs/muliashi                      # both readings of the spacing
@@ -49,8 +43,9 @@ from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import simple_slope
 from fdem.io.jsonable import write_json
 
-__all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "toughness_G_I", "property_sets", "build",
-           "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS", "JOINT_COHESION", "JOINT_FRICTION"]
+__all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "BRIDGE_COHESION", "bridge_cohesion",
+           "property_sets", "build", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
+           "JOINT_COHESION", "JOINT_FRICTION"]
 
 
 NAME = "muliashi"
@@ -113,24 +108,30 @@ JOINT_COHESION, JOINT_FRICTION = 149.33e3, 12.35
 ZBAR = 0.38631  # area under the Munjiza softening curve
 
 
-def toughness_G_I(toughness_ratio: float = 88.7) -> float:
-    """``G_I = K_IC^2 (1 - nu^2) / E`` [J/m^2] with ``K_IC = UCS / 88.7`` [Pa m^0.5] (Whittaker et al. 1992)."""
-    k_ic = UCS / toughness_ratio
-    return k_ic ** 2 * (1 - POISSON ** 2) / YOUNG
+BRIDGE_COHESION = {1.0: 11.57e6, 0.6: 12.23e6, 0.5: 11.51e6}  # [Pa] docs/calibration.md (UCS = 34.5 MPa)
 
 
-def property_sets(intact_phi: float = 30.0, g_i: float = 300.0, penalty_ratio: float = 10.0,
+def bridge_cohesion(size: float) -> float:
+    """Rock-bridge cohesion [Pa] calibrated to UCS = 34.5 MPa at element size ``size`` [m]
+    (:data:`BRIDGE_COHESION`); other sizes get the mean 11.8 MPa (the table's spread, +-3 %,
+    is mesh scatter, not a trend with size)."""
+    return BRIDGE_COHESION.get(round(float(size), 3), 11.8e6)
+
+
+def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 10.0,
                   joint_softening_slip: float = 1e-3, dilation_angle: float = 5.0, dilation_limit: float = 5e-3):
-    """Crack-element property sets derived from the macro properties (module docstring)."""
+    """Crack-element property sets at element size ``size`` [m]: calibrated rock bridges (tag 0)
+    and the paper's bedding joints (tag 1); module docstring."""
+    from fdem.physics.calibration import size_scaled_properties
     from fdem.physics.crack_properties import CrackProperties
 
-    phi = math.radians(intact_phi)
-    c_rock = UCS * (1 - math.sin(phi)) / (2 * math.cos(phi))
+    if not (math.isfinite(size) and size > 0):
+        raise ValueError(f"property_sets: element size must be a positive length [m], got {size!r}")
     p = penalty_ratio * YOUNG
     ft_joint = JOINT_COHESION / 10
     return {
-        0: CrackProperties(f_t=UCS / 10, c=c_rock, phi=intact_phi, G_I=g_i, G_II=10 * g_i, p_n=p, p_t=p,
-                           name="mudstone rock bridges"),
+        0: size_scaled_properties(UCS / 10, bridge_cohesion(size), intact_phi, p, size, p_t=p,
+                                  name="mudstone rock bridges"),
         1: CrackProperties(f_t=ft_joint, c=JOINT_COHESION, phi=JOINT_FRICTION,
                            G_I=ft_joint * ZBAR * joint_softening_slip,
                            G_II=JOINT_COHESION * ZBAR * joint_softening_slip, p_n=p, p_t=p,
@@ -162,7 +163,7 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
     model.roller("left", "x")
     model.roller("right", "x")
     model.set_element_damping()
-    sets = property_sets()
+    sets = property_sets(size)
     cracks = CrackSet(topo, sets, contact_penalty=sets[0].p_n,
                       heterogeneity=Heterogeneity("normal", cov=0.1, seed=heterogeneity_seed, tags=(0,)))
     report = geostatic_start(model, cracks)
