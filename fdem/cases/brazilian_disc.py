@@ -22,6 +22,8 @@ centre and over-predicts the strength by about 50 % (measured: 1.50 vs 1.09 at D
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 import argparse
 import math
 import time
@@ -203,7 +205,7 @@ def main(argv=None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for n in args.divisions:
-        r = run(n, args.v_platen, out_dir=None if args.no_fields else args.out / f"D_over_{n}", progress=True,
+        r = run(n, args.v_platen, out_dir=None if args.no_fields else args.out / f"D_over_{n}", progress=not args.quiet,
                 max_time=args.max_time)
         results.append(r)
         fe = r["first_event"]
@@ -220,7 +222,7 @@ def main(argv=None) -> dict:
     written = [args.out / "summary.json", args.out / "brazilian.json"]
     if not args.no_pictures:
         written.append(load_plot(results, args.out / "brazilian_load.png"))
-    print("wrote " + ", ".join(map(str, written)))
+    say("wrote " + ", ".join(map(str, written)))
     finish_run(args.out, summary)
     return summary
 

@@ -35,6 +35,8 @@ run ended (:func:`exit_code`): 0 finished (whatever the slope did), 1 error or u
 """
 from __future__ import annotations
 
+from fdem.io.messages import say, warn
+
 import argparse
 import math
 import os
@@ -146,7 +148,11 @@ def add_resume_options(parser: argparse.ArgumentParser) -> None:
 
 def check_common(parser: argparse.ArgumentParser, args) -> None:
     """Refuse bad values of the shared options before anything long starts (``--size`` may be
-    one number or, for the cases that sweep sizes, a list)."""
+    one number or, for the cases that sweep sizes, a list), and set how much the run says
+    (:func:`fdem.io.messages.configure`: ``--quiet`` leaves only warnings and the result)."""
+    from fdem.io.messages import configure
+
+    configure(quiet=getattr(args, "quiet", False))
     sizes = args.size if isinstance(args.size, list) else [] if args.size is None else [args.size]
     if any(not (math.isfinite(h) and h > 0) for h in sizes):
         parser.error(f"--size must be a positive number of metres, got {args.size}")
@@ -353,10 +359,10 @@ def report_cost(parser: argparse.ArgumentParser, sim, args, simulated_seconds: f
         estimate = estimate_cost(sim, simulated_seconds=simulated_seconds)
     finally:
         sim.dt = step
-    print(f"cost estimate ({what}):\n  " + estimate.describe().replace("\n", "\n  "))
+    say(f"cost estimate ({what}):\n  " + estimate.describe().replace("\n", "\n  "))
     warning = dt_warning(estimate)
     if warning:
-        print(f"warning: {warning}")
+        warn(warning)
     hours = (estimate.wall_seconds or 0.0) / 3600.0
     if hours > CONFIRM_ABOVE_HOURS and not getattr(args, "yes", False) and getattr(args, "resume", None) is None:
         question = (f"the estimate is {hours:.1f} h of wall time (above {CONFIRM_ABOVE_HOURS:g} h)")
@@ -381,7 +387,7 @@ def start_journal(sim, args, folder=None):
     if getattr(args, "resume", None) is not None and path.is_file():
         journal = RunJournal.resume_from(sim, path, every)
         sim.continue_outputs()
-        print(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
+        say(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
               f"{len(journal.done)} stage(s) done" + (f", {journal.resume['name']} in progress" if journal.resume else ""))
         return journal
     return RunJournal(path, every)

@@ -35,6 +35,8 @@ reports the change of the peak (the quasi-static check).
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 import argparse
 import math
 import time
@@ -459,8 +461,8 @@ def main(argv=None) -> dict:
             args.spec, tried = calibrate(args.spec, args.target_peak, v_platen=args.v_platen)
         except ValueError as err:
             raise SystemExit(f"fdem run {NAME}: {err}")
-        print(f"calibrated: c = {args.spec.cohesion / 1e6:.5g} MPa after {len(tried)} runs")
-    r = run(args.spec, args.v_platen, out_dir=out / "fields" if args.fields else None, progress=True,
+        say(f"calibrated: c = {args.spec.cohesion / 1e6:.5g} MPa after {len(tried)} runs")
+    r = run(args.spec, args.v_platen, out_dir=out / "fields" if args.fields else None, progress=not args.quiet,
             max_time=args.max_time)
     kind = "UCS" if args.spec.confinement == 0 else f"biaxial peak at sigma_3 = {args.spec.confinement / 1e6:g} MPa"
     print(f"{r['n_triangles']} triangles, h = {args.size:g} m: {kind} = {r['peak_stress_Pa'] / 1e6:.4g} MPa "
@@ -484,7 +486,7 @@ def main(argv=None) -> dict:
         written.append(stress_strain_plot(r, out / "stress_strain.png"))
         written.append(failure_plot(r, out / "failure_pattern.png"))
     write_json(out / "summary.json", summary, indent=1)
-    print("wrote " + ", ".join(map(str, written)))
+    say("wrote " + ", ".join(map(str, written)))
     finish_run(out, summary)
     return summary
 

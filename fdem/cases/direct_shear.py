@@ -29,6 +29,8 @@ one line per normal stress).
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 import argparse
 import math
 import time
@@ -336,7 +338,7 @@ def main(argv=None) -> dict:
     written = [out / "summary.json", write_curves(out / "shear_curves.csv", series)]
     if not args.no_pictures:
         written.append(shear_plot(series, out / "shear_curves.png"))
-    print("wrote " + ", ".join(map(str, written)))
+    say("wrote " + ", ".join(map(str, written)))
     finish_run(out, summary)
     return summary
 

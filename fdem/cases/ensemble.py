@@ -181,7 +181,11 @@ def parse_args(argv=None) -> tuple[argparse.Namespace, Ensemble]:
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each trial's simulated time [s] (a smoke run: realizations end below_bracket)")
     parser.add_argument("--no-pictures", action="store_true", help="no PNG pictures")
+    parser.add_argument("--quiet", action="store_true", help="only warnings and the result")
     args = parser.parse_args(argv)
+    from fdem.io.messages import configure
+
+    configure(quiet=args.quiet)
     try:
         require_dask()
     except ImportError:

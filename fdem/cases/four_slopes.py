@@ -25,6 +25,8 @@ geostatic stage is a static solve with pre-loaded crack elements, and stages end
 """
 from __future__ import annotations
 
+from fdem.io.messages import say, warn
+
 import time
 import warnings
 from pathlib import Path
@@ -289,16 +291,16 @@ def main(argv=None) -> dict:
         except ValueError as err:  # bad input: say what is wrong, no traceback
             parser.error(str(err))
     for w in caught:
-        print(f"warning: {w.message}")
+        warn(str(w.message))
     if args.rigid_blocks:  # seconds, beside the FDEM factor of safety that follows
         from fdem.blocks.slope import print_rigid_blocks
         print_rigid_blocks(geometry, four_slope_property_sets(), DENSITY * GRAVITY, args.out)
     elapsed = time.perf_counter() - t0
     threads = threads_for_mesh(args.threads, topo.n_triangles)
     report = quality_report(mesh)
-    print(f"meshed and exploded in {elapsed:.2f} s: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
+    say(f"meshed and exploded in {elapsed:.2f} s: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
           f"({int((topo.crack_tag > 0).sum())} on joints); {threads} thread(s)")
-    print(report)
+    say(report)
     out = args.out
     name = f"{args.angle}_{args.spacing}"
     mesh.save(out / f"{name}.msh")
@@ -307,7 +309,7 @@ def main(argv=None) -> dict:
     if not args.no_pictures:
         written.append(plot_mesh_png(topo, out / f"{name}_mesh.png",
                                      title=f"{args.angle}-angle {args.spacing} slope: {topo.n_triangles} triangles"))
-    print("wrote " + ", ".join(map(str, written)))
+    say("wrote " + ", ".join(map(str, written)))
     joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
     summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset,
                "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
@@ -320,7 +322,7 @@ def main(argv=None) -> dict:
         run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)
         cap_simulated_time(sim, args.max_time)
         use_density_scaling(sim, args.density_scaling)
-        print(f"time step {sim.dt:.3g} s (critical limits: "
+        say(f"time step {sim.dt:.3g} s (critical limits: "
               + ", ".join(f"{k} {v:.3g} s" for k, v in sim.critical_dt()[1].items()) + ")")
         summary["cost_estimate"] = report_runout_cost(parser, sim, args, workflow)
         t1 = time.perf_counter()
@@ -342,7 +344,7 @@ def main(argv=None) -> dict:
             finish_run(out, summary)
             return summary
         for st in result["stages"]:
-            print(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
+            say(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
                   f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")
         print(f"outcome: {summary['outcome']}"
               + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
@@ -353,5 +355,5 @@ def main(argv=None) -> dict:
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")
     write_json(out / "summary.json", summary)
     finish_run(out, summary)
-    print(f"wrote {out / 'summary.json'}")
+    say(f"wrote {out / 'summary.json'}")
     return summary

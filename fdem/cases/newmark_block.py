@@ -174,10 +174,14 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="folder for newmark.json and newmark.png (default runs/newmark; the committed figures: --out docs/verification)")
     parser.add_argument("--size", type=float, nargs="*", default=list(SIZES), help="element sizes [m]")
     parser.add_argument("--no-pictures", action="store_true", help="skip the PNG")
+    parser.add_argument("--quiet", action="store_true", help="only warnings and the result")
     parser.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each run's simulated time [s] (a smoke run; default: until the block stops)")
     args = parser.parse_args(argv)
+    from fdem.io.messages import configure
+
+    configure(quiet=args.quiet)
     check_common(parser, args)
     if not args.size:
         parser.error("--size needs at least one element size [m]")

@@ -30,6 +30,8 @@ assumptions hold: a rigid block on a perfectly plastic plane.
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 import argparse
 from fdem.io.jsonable import write_json
 import math
@@ -360,6 +362,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--upper", type=float, default=2.0, help="reduction factor known to fail")
     parser.add_argument("--tol", type=float, default=0.01, help="bracket width at which the search stops")
     parser.add_argument("--no-pictures", action="store_true", help="skip the FoS-against-mesh figure")
+    parser.add_argument("--quiet", action="store_true", help="only warnings and the result")
     parser.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
                         help="cap on each trial's simulated time [s] (a smoke run: its FoS means nothing)")
     parser.add_argument("--max-trials", type=int, default=DEFAULT_MAX_TRIALS,
@@ -369,6 +372,9 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
     args = parser.parse_args(argv)
+    from fdem.io.messages import configure
+
+    configure(quiet=args.quiet)
     check_common(parser, args)
     check_search(parser, args)
     return args
@@ -419,9 +425,9 @@ def main(argv=None) -> list:
                      "max_trials" else "")
                   + (f"; {r['capped_trials']} trial(s) stopped at --max-time, counted as failing: smoke run"
                      if r["capped_trials"] else ""), flush=True)
-    print(f"wrote {args.out / 'planar_failure.json'}")
+    say(f"wrote {args.out / 'planar_failure.json'}")
     if not args.no_pictures and any(r["fos"] is not None for r in rows):
-        print(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")
+        say(f"wrote {plot([r for r in rows if r['fos'] is not None], args.out / 'planar_failure.png')}")
     finish_run(args.out, {"outcome": "finished"})
     return rows
 

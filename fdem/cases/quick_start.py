@@ -29,6 +29,8 @@ limit equilibrium of the wedge above the toe joint gives about F = 1.2 (Hoek-Bra
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 from fdem.io.jsonable import write_json
 import math
 import time
@@ -179,7 +181,7 @@ def main(argv=None) -> dict:
     cap_simulated_time(sim, args.max_time)
     use_density_scaling(sim, args.density_scaling)
     threads = threads_for_mesh(args.threads, sim.model.topology.n_triangles)
-    print(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
+    say(f"{sim.model.topology.n_triangles} triangles, {sim.model.topology.n_cracks} crack elements, "
           f"time step {sim.dt:.3g} s, {threads} thread(s)")
     cost = report_runout_cost(parser, sim, args, workflow)
     journal = start_journal(sim, args)
@@ -209,7 +211,7 @@ def main(argv=None) -> dict:
           + f"; runout {_fmt(run.get('runout_distance_m'))} m beyond the toe, displaced area "
           f"{_fmt(run.get('displaced_area_m2'))} m^2; {summary['cracks']['broken']} crack elements broken; "
           f"{summary['wall_seconds']:.0f} s")
-    print(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}" + ("" if args.no_pictures else f", {out / 'failure.png'}"))
+    say(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}" + ("" if args.no_pictures else f", {out / 'failure.png'}"))
     return summary
 
 

@@ -20,6 +20,8 @@ ones coloured by speed, arrows their velocities, rock bridges red).
 """
 from __future__ import annotations
 
+from fdem.io.messages import say
+
 import math
 import time
 from dataclasses import dataclass
@@ -223,7 +225,7 @@ def main(argv=None) -> dict:
         summary = jsonable({"case": NAME, "ensemble": str(args.ensemble), "realizations": rows})
         write_json(out / "summary.json", summary)
         finish_run(out, summary)
-        print(f"wrote {out / 'summary.json'}")
+        say(f"wrote {out / 'summary.json'}")
         return summary
     names = list(SCENES) if "all" in args.scene else args.scene
     record = sine_record(args.pga, args.frequency, args.cycles) if args.pga > 0 else None
@@ -264,5 +266,5 @@ def main(argv=None) -> dict:
     summary = jsonable(summary)     # what summary.json holds, returned as such
     write_json(out / "summary.json", summary)
     finish_run(out, summary)
-    print(f"wrote {out / 'summary.json'}" + (f"; no answer for {', '.join(failed)}" if failed else ""))
+    say(f"wrote {out / 'summary.json'}" + (f"; no answer for {', '.join(failed)}" if failed else ""))
     return summary

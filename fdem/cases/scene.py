@@ -16,6 +16,8 @@ outputs (``summary.json``, ``history.csv`` with the monitors, ParaView series, p
 """
 from __future__ import annotations
 
+from fdem.io.messages import say, warn
+
 import time
 import warnings
 from pathlib import Path
@@ -69,7 +71,7 @@ def _read(parser, args) -> dict:
     if args.mesh is not None:
         dropped = [s for s in ("slope", "joints") if raw.pop(s, None)]
         if dropped:
-            print(f"--mesh {args.mesh} replaces the scene's " + " and ".join(f"[{d}]" for d in dropped))
+            say(f"--mesh {args.mesh} replaces the scene's " + " and ".join(f"[{d}]" for d in dropped))
         raw.setdefault("scene", {})["mesh"] = str(args.mesh.resolve())
     try:
         return check_scene(raw, path)
@@ -160,7 +162,7 @@ def run_scene(parser, args, scene: dict) -> dict:
         except ValueError as err:  # the mesher's own refusal (a size too large for the outline, ...)
             parser.error(f"{args.scene}: {err}")
     for w in caught:
-        print(f"warning: {w.message}")
+        warn(str(w.message))
     topo = build_topology(mesh)
     try:
         sim, cracks, start = build_simulation(scene, topo, out, pictures=not args.no_pictures,
@@ -173,7 +175,7 @@ def run_scene(parser, args, scene: dict) -> dict:
     cap_simulated_time(sim, args.max_time)
     use_density_scaling(sim, args.density_scaling)
     threads = threads_for_mesh(args.threads, topo.n_triangles)
-    print(f"{sc['name']}: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
+    say(f"{sc['name']}: {topo.n_triangles} triangles, {topo.n_cracks} crack elements "
           f"({int((topo.crack_tag > 0).sum())} on joints), time step {sim.dt:.3g} s, {threads} thread(s)")
     cost = report_runout_cost(parser, sim, args, workflow)
     journal = start_journal(sim, args)
@@ -201,5 +203,5 @@ def run_scene(parser, args, scene: dict) -> dict:
                  f", stable up to F = {lo:.3f}" if lo is not None else "")
               + (f", failed at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
               + f"; {summary['cracks']['broken']} crack elements broken; {summary['wall_seconds']:.0f} s")
-        print(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}")
+        say(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}")
     return summary

@@ -37,6 +37,8 @@ model: compare ``a_c`` with ``k_y`` and the displacements below ``a_c``, not the
 """
 from __future__ import annotations
 
+from fdem.io.messages import say, warn
+
 import math
 import time
 import warnings
@@ -264,8 +266,8 @@ def main(argv=None) -> dict:
     sim, shaking = build(args.size, args.widths[0], args.frequency, args.cycles, args.settle, args.threshold)
     cap_simulated_time(sim, args.max_time)   # a smoke run: every trial stops at --max-time (each restarts at t = 0)
     threads = threads_for_mesh(args.threads, sim.model.topology.n_triangles)
-    print(f"{sim.model.topology.n_triangles} triangles, time step {sim.dt:.3g} s; each trial "
-          f"{shaking.duration + shaking.settle:g} s of shaking and settling", flush=True)
+    say(f"{sim.model.topology.n_triangles} triangles, time step {sim.dt:.3g} s; each trial "
+          f"{shaking.duration + shaking.settle:g} s of shaking and settling")
     lower, upper, tol = args.bracket
     outcome, ending = "finished", None
     try:
@@ -275,7 +277,7 @@ def main(argv=None) -> dict:
     except BracketError as err:
         a_c, bracket, ended_by = None, None, "bracket"
         outcome, ending = "bracket_error", str(err)
-        print(err)
+        warn(str(err))
     search = list(shaking.log)
     print(f"FDEM critical amplitude a_c = {a_c if a_c is None else round(a_c, 4)} g, bracket {bracket}", flush=True)
     amps = [r * ky for r in args.amplitudes]
@@ -307,9 +309,9 @@ def main(argv=None) -> dict:
             width.append(row)
         for r in width:
             r["a_c_difference_g"] = None if r["a_c_g"] is None else r["a_c_g"] - a_c
-            print(f"  width check: crest {r['crest_length_m']:g} m (model {r['model_width_m']:.1f} m wide, "
+            say(f"  width check: crest {r['crest_length_m']:g} m (model {r['model_width_m']:.1f} m wide, "
                   f"{r['n_triangles']} triangles): a_c {r['a_c_g'] if r['a_c_g'] is None else round(r['a_c_g'], 4)} g, "
-                  f"bracket {r['a_c_bracket_g']}", flush=True)
+                  f"bracket {r['a_c_bracket_g']}")
     sim.close()
     model_width = float(np.ptp(sim.model.topology.x0[:, 0]))
     summary = {"case": NAME, "outcome": outcome, "ending": ending, "time_capped": args.max_time is not None,
@@ -329,5 +331,5 @@ def main(argv=None) -> dict:
         summary["picture"] = str(plot(summary, shaking, a_y, out / "seismic.png"))
     write_json(out / "summary.json", summary)
     finish_run(out, summary)
-    print(f"wrote {out / 'summary.json'} in {summary['wall_seconds']:.0f} s")
+    say(f"wrote {out / 'summary.json'} in {summary['wall_seconds']:.0f} s")
     return summary

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import numbers
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["SceneError", "Key", "SCHEMA", "JOINT_KINDS", "SLOPE_KINDS", "SUPPORT_KINDS", "read_scene",
