@@ -28,6 +28,7 @@ Crack-element properties (every choice is a keyword of :func:`property_sets`):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -44,7 +45,7 @@ from fdem.geometry.polygons import simple_slope
 from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "BRIDGE_COHESION", "bridge_cohesion",
-           "property_sets", "build", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
+           "property_sets", "build", "meso_views", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
            "JOINT_COHESION", "JOINT_FRICTION"]
 
 
@@ -106,6 +107,10 @@ def muliashi_geometry(spacing_rule: str = "pitch", above_toe: bool = True, min_j
 YOUNG, POISSON, DENSITY, UCS = 5.96e9, 0.15, 2560.0, 34.5e6
 JOINT_COHESION, JOINT_FRICTION = 149.33e3, 12.35
 ZBAR = 0.38631  # area under the Munjiza softening curve
+G = 9.81  # [m/s^2]
+FACE_ANGLE = 65.0  # [deg]
+MIN_ASSEMBLY_TRIANGLES = 2  # a fragment of one triangle is debris, not an assembly (cases.md B)
+N_FIRST_BREAKS = 60
 
 
 BRIDGE_COHESION = {1.0: 11.57e6, 0.6: 12.23e6, 0.5: 11.51e6}  # [Pa] docs/calibration.md (UCS = 34.5 MPa)
@@ -173,6 +178,139 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
     return geometry, sim, cracks, report
 
 
+def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures: bool = True,
+               min_triangles: int = MIN_ASSEMBLY_TRIANGLES, n_first: int = N_FIRST_BREAKS) -> dict:
+    """The meso-scale readings of the slide (:mod:`fdem.results.meso`) and, with ``pictures``,
+    ``meso_initiation.png``, ``meso_events.png``, ``meso_magnitudes.png``, ``meso_fragments.png``
+    and ``meso_forces.png`` (:mod:`fdem.io.meso_pictures`). Returns the figures for the summary:
+
+    * initiation: the first ``n_first`` breaks, the first one's place, its distance to the
+      nearest joint tip and the layer (0 = lowest) of that tip, how far the front climbs;
+    * fragments: assemblies of at least ``min_triangles`` triangles (smaller: debris) when 1/3,
+      2/3 and all of the breaks have happened: count, the largest besides the ground, the mean
+      elevation where they formed;
+    * forces: before sliding (the first kept state) the share of the triangles within 2 m of the
+      face whose most compressive stress lies within 15 deg of the face (65 deg); during the
+      slide (the kept state nearest the kinetic-energy peak) the mean compressive force of
+      intact rock-bridge elements within 1 m of a joint tip against the others [N/m];
+    * magnitudes: :func:`fdem.results.meso.normality` against the paper's N(-3.07, 0.495).
+    """
+    from fdem.io import meso_pictures as mp
+    from fdem.results import meso
+    from fdem.results.events import MULIASHI
+
+    topo, cracks = sim.model.topology, sim.cracks
+    tri = topo.triangles
+    x_end = sim.state.x
+    joints = np.concatenate([np.asarray(j.segments).reshape(-1, 4) for j in geometry.joint_sets]) \
+        if geometry.joint_sets else np.zeros((0, 4))
+    tips = np.concatenate([joints[:, :2], joints[:, 2:]]) if joints.size else np.zeros((0, 2))
+    dip = math.radians(25.0)
+    normal = np.array([-math.sin(dip), math.cos(dip)])
+    from fdem.geometry.polygons import slope_toe
+
+    toe = np.array(slope_toe(geometry.bodies[0]))
+    result: dict = {"min_assembly_triangles": min_triangles, "first_breaks": n_first}
+
+    # initiation order
+    ev = cracks.events
+    x0 = topo.x0
+    seg0 = np.column_stack([x0[topo.crack_nodes[:, 0]], x0[topo.crack_nodes[:, 1]]])
+    if len(ev):
+        init = meso.initiation_order(ev["time"], ev["x"], ev["y"], n_first)
+        first = np.array(init["first"])
+        if tips.size:
+            d = np.linalg.norm(tips - first, axis=1)
+            k = int(np.argmin(d))
+            layer = int(round(float((tips[k] - toe) @ normal) / 2.14 - 0.5))
+        else:
+            d, k, layer = np.array([math.nan]), 0, -1
+        sel = ev[init["order"]]
+        result["initiation"] = {"first_xy_m": init["first"], "first_time_s": float(sel["time"][0]),
+                                "first_tag": int(sel["tag"][0]), "first_mode": str(sel["mode"][0]),
+                                "distance_to_joint_tip_m": float(d[k]), "joint_tip_layer": layer,
+                                "climb_m_per_break": init["climb_m_per_break"],
+                                "y_first_10_mean_m": float(np.mean(sel["y"][:10])),
+                                "y_last_10_mean_m": float(np.mean(sel["y"][-10:]))}
+        if pictures:
+            mp.initiation_map(out / "meso_initiation.png", x0, tri, seg0[sel["element"]], init["rank"],
+                              time=sel["time"], joints=joints)
+    # events
+    if not catalogue.empty:
+        e = catalogue.events
+        if pictures:
+            mp.event_map(out / "meso_events.png", x0, tri, e["x"], e["y"], e["magnitude"], t=e["t_start"],
+                         joints=joints)
+        if e.size >= 3:
+            test = meso.normality(e["magnitude"], MULIASHI["mean"], MULIASHI["std"])
+            result["magnitudes"] = test
+            if pictures:
+                mp.magnitude_histogram(out / "meso_magnitudes.png", e["magnitude"],
+                                       reference={"mean": MULIASHI["mean"], "std": MULIASHI["std"],
+                                                  "count": MULIASHI["count"]}, test=test)
+    # fragments at 1/3, 2/3 and all of the breaks
+    snaps = recorder.snapshots
+    area = np.abs(topo.triangle_area0)
+    yc0 = x0[tri][:, :, 1].mean(axis=1)
+    bt = cracks.break_time()
+    if len(ev) and snaps:
+        times = np.sort(ev["time"])
+        frames, rows = [], []
+        for share in (1 / 3, 2 / 3, 1.0):
+            t_at = float(times[max(0, int(math.ceil(share * times.size)) - 1)])
+            snap = next((sn for sn in snaps if sn.time >= t_at), snaps[-1])
+            _, label = meso.fragments_at(topo, bt, snap.time)
+            asm = meso.assemblies(label, area, min_triangles)
+            table = meso.assembly_table(asm, area, yc0)
+            rest = slice(1, None)  # 0 is the largest: the ground
+            rows.append({"time_s": snap.time, "broken": int(np.sum(bt <= snap.time)),
+                         "assemblies_besides_ground": int(max(table["area"].size - 1, 0)),
+                         "largest_besides_ground_m2": float(table["area"][rest].max()) if table["area"].size > 1 else 0.0,
+                         "mean_formed_elevation_m": float(np.average(table["y"][rest], weights=table["area"][rest]))
+                         if table["area"].size > 1 else math.nan,
+                         "debris_triangles": int(np.sum(asm < 0))})
+            frames.append((snap.x, asm, f"t = {snap.time:.3f} s, {rows[-1]['broken']} broken"))
+        result["fragments"] = rows
+        if pictures:
+            mp.fragment_maps(out / "meso_fragments.png", frames, tri, min_triangles)
+    # force chains and principal directions before and during sliding
+    if snaps:
+        before = snaps[0]
+        during = max(snaps, key=lambda sn: sn.kinetic)
+        face = math.radians(FACE_ANGLE)
+        fdir = np.array([math.cos(face), math.sin(face)])
+        fn = np.array([-fdir[1], fdir[0]])
+        c0 = x0[tri].mean(axis=1)
+        near_face = (np.abs((c0 - toe) @ fn) < 2.0) & (c0[:, 1] > toe[1]) & (c0[:, 1] < toe[1] + 15.0)
+        tip_near = np.zeros(topo.n_cracks, bool)
+        mid0 = 0.5 * (seg0[:, :2] + seg0[:, 2:])
+        for t in tips:
+            tip_near |= np.linalg.norm(mid0 - t, axis=1) < 1.0
+        bridge = topo.crack_tag == 0
+        panels = []
+        for name, sn in (("before sliding", before), ("during the slide", during)):
+            pd = meso.principal_directions(sn.sxx, sn.syy, sn.sxy)
+            cen = sn.x[tri].mean(axis=1)
+            with np.errstate(invalid="ignore"):
+                intact = ~(bt <= sn.time)
+            comp = np.where(intact & (sn.crack_normal < 0), -sn.crack_normal * topo.crack_length0, 0.0)
+            cs, cm = meso.force_segments(cen, topo.crack_triangles, comp)
+            ks, km = meso.force_segments(cen, sn.contact_pairs, sn.contact_force)
+            panels.append({"x": sn.x, "title": f"{name}: t = {sn.time:.3f} s", "crack": (cs, cm), "contact": (ks, km),
+                           "centroids": cen, "theta2": pd["theta2"], "s2": pd["s2"]})
+            near = comp[bridge & tip_near & intact]
+            far = comp[bridge & ~tip_near & intact]
+            result[f"forces_{name.split()[0]}"] = {
+                "time_s": sn.time,
+                "face_parallel_share": meso.direction_share(pd["theta2"][near_face], face, math.radians(15.0)),
+                "bridge_force_near_tips_N_per_m": float(near.mean()) if near.size else math.nan,
+                "bridge_force_elsewhere_N_per_m": float(far.mean()) if far.size else math.nan,
+                "contact_pairs": int(km.size), "contact_force_max_N_per_m": float(km.max()) if km.size else 0.0}
+        if pictures:
+            mp.force_chain_maps(out / "meso_forces.png", panels, tri)
+    return result
+
+
 def build_simulation(size: float, spacing_rule: str = "pitch", above_toe: bool = True):
     """Module-level builder for the parallel factor-of-safety workers."""
     return build(size, spacing_rule, above_toe, progress=False)[1]
@@ -184,6 +322,9 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     from fdem.workflow.stages import Convergence, Stage, response_time, run_stage
     from fdem.workflow.fos import GravityIncrease, factor_of_safety
     from fdem.solve.simulation import InstabilityError
+    from fdem.workflow.fos import default_trial_stage
+    from fdem.workflow.slope import SlopeWorkflow, runout_stage
+    from fdem.results.meso import MesoRecorder
 
     t0 = time.perf_counter()
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
@@ -212,15 +353,23 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
               f"{fos_summary['wall_seconds']:.0f} s); loading at k = {k_fail:.3f}")
     else:
         k_fail, fos_summary = args.gravity_factor, None
-    # The collapse under many times gravity is violent: half the automatic step keeps contact
-    # impacts accurate (docs/pareto.md: impact energy 1.5 % at dt_fraction 0.8, 0.25 % at 0.4); at
-    # 0.8 the first run inverted a crest triangle at t = 1.09 s.
-    failure_stage = Stage("gravity_increase", gravity_factor=k_fail, max_time=args.runout_time or 20 * T,
-                          converge=Convergence(unbalanced_ratio=None, kinetic_ratio=0.01, min_time=2 * T, hold_for=T),
-                          dt_fraction=0.4)
+    # The slide (docs/cases.md B): at the critical factor, as the paper raises the density until
+    # the slope starts to fail. First the failing trial's damped stage ("onset": fundamental-mode
+    # damping, ends when a node has moved 1 % of the model height), so that the sudden change of
+    # gravity does not ring the slope to twice its static load; then the slope workflow's
+    # undamped runout ("slide") to rest: kinetic energy below 1 % of its peak for one response
+    # time, capped at --runout-time or max(20 T, 4 sqrt(2 H / (k g))).
+    height = float(geometry.bounds[3] - geometry.bounds[1])
+    onset_stage = dataclasses.replace(default_trial_stage(sim), name="onset", gravity_factor=k_fail)
+    slide_stage = dataclasses.replace(runout_stage(SlopeWorkflow(runout_time=args.runout_time), T, height, k_fail * G),
+                                      name="slide", gravity_factor=k_fail)
+    recorder = MesoRecorder(interval=T / 4).attach(sim)
+    stages = []
     outcome, ending = "finished", None
     try:
-        failure = run_stage(sim, failure_stage, journal=journal)
+        for stage in (onset_stage, slide_stage):
+            stages.append(run_stage(sim, stage, journal=journal))
+        failure = stages[-1]
     except KeyboardInterrupt as stop:  # at a whole step: the journal has written its checkpoint
         outcome, ending = "interrupted", f"interrupted ({stop.args[0] if stop.args else 'Ctrl-C'})"
     except InstabilityError as err:  # the journal's checkpoint is the last good state
@@ -233,10 +382,11 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
             "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail})
         print(f"[{spacing_rule}] {ending}; resume with: fdem run muliashi --resume {args.out}")
         return summary
+    meso = meso_views(out, sim, geometry, report.catalogue(), recorder, pictures=not args.no_pictures)
     summary = report.write(out, pictures_on=not args.no_pictures, extra={
         "case": f"muliashi_{spacing_rule}", "spacing_rule": spacing_rule, "joints_above_toe_only": not args.below_toe,
         "size_m": args.size, "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail,
-        "failure_stage": failure.as_dict(), "response_time_s": T, "wall_seconds": time.perf_counter() - t0,
+        "stages": [r.as_dict() for r in stages], "meso": meso, "response_time_s": T, "wall_seconds": time.perf_counter() - t0,
         "time_capped": time_capped(sim), "outcome": "finished", "checkpoints": journal.writes,
         "paper": {"density_factor_reached": 10.0, "events": 238, "magnitude_mean": -3.07, "magnitude_std": 0.495,
                   "magnitude_min": -4.91, "magnitude_max": -2.05}})
@@ -253,9 +403,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--below-toe", action="store_true", help="also build the joints below the toe's elevation")
     parser.add_argument("--upper", type=float, default=12.0, help="upper end of the gravity-factor bracket")
     parser.add_argument("--tol", type=float, default=0.1, help="bracket width of the gravity-factor search")
-    parser.add_argument("--overload", type=float, default=0.1,
-                        help="the failure run loads at (1 + overload) times the smallest failing factor")
-    parser.add_argument("--runout-time", type=float, default=None, help="cap of the failure run [s]")
+    parser.add_argument("--overload", type=float, default=0.0,
+                        help="the slide loads at (1 + overload) times the smallest failing factor (default 0)")
+    parser.add_argument("--runout-time", type=float, default=None,
+                        help="cap of the slide [s] (default max(20 T, 4 sqrt(2 H / (k g))))")
     parser.add_argument("--workers", type=int, default=1, help="factor-of-safety trials in parallel")
     parser.add_argument("--gravity-factor", type=float, default=None,
                         help="skip the search and load at this gravity factor")

@@ -1,0 +1,82 @@
+"""The meso-scale readings of fdem.results.meso on small arrays with known answers."""
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fdem.results import meso
+
+
+def test_initiation_order_is_time_order_and_measures_the_climb():
+    # breaks at y = 0, 1, 2, 3 m happening in the order y = 0, 1, 2, 3 but listed shuffled
+    t = np.array([0.3, 0.1, 0.4, 0.2])
+    y = np.array([2.0, 0.0, 3.0, 1.0])
+    x = np.array([5.0, 7.0, 6.0, 8.0])
+    r = meso.initiation_order(t, x, y)
+    assert list(r["order"]) == [1, 3, 0, 2]
+    assert r["first"] == (7.0, 0.0)
+    assert r["climb_m_per_break"] == pytest.approx(1.0)  # one metre higher per break
+    assert list(meso.initiation_order(t, x, y, n=2)["order"]) == [1, 3]
+    with pytest.raises(ValueError, match="same length"):
+        meso.initiation_order(t, x[:3], y)
+
+
+def _chain(n_tri: int):
+    """Triangles 0..n-1 in a row, crack element k between triangles k and k+1."""
+    pairs = np.array([[k, k + 1] for k in range(n_tri - 1)])
+    return SimpleNamespace(n_triangles=n_tri, n_cracks=n_tri - 1, crack_triangles=pairs)
+
+
+def test_fragments_at_splits_a_chain_when_its_middle_element_breaks():
+    topo = _chain(4)  # cracks (0,1), (1,2), (2,3)
+    bt = np.array([np.nan, 0.5, np.nan])
+    n, label = meso.fragments_at(topo, bt, 0.4)
+    assert n == 1
+    n, label = meso.fragments_at(topo, bt, 0.5)  # broken at its break time
+    assert n == 2 and label[0] == label[1] != label[2] == label[3]
+
+
+def test_assemblies_drop_single_triangle_debris_and_rank_by_area():
+    # fragments: {0, 1} area 2, {2} area 5 (one triangle: debris), {3, 4, 5} area 3
+    label = np.array([0, 0, 1, 2, 2, 2])
+    area = np.array([1.0, 1.0, 5.0, 1.0, 1.0, 1.0])
+    a = meso.assemblies(label, area, min_triangles=2)
+    assert list(a) == [1, 1, -1, 0, 0, 0]
+    table = meso.assembly_table(a, area, np.array([0.0, 2.0, 9.0, 1.0, 1.0, 4.0]))
+    assert table["area"] == pytest.approx([3.0, 2.0])
+    assert table["y"] == pytest.approx([2.0, 1.0])
+
+
+def test_principal_directions_of_a_rotated_uniaxial_compression():
+    # uniaxial compression of 2 MPa along 65 deg: s = -2 n n^T
+    th = math.radians(65.0)
+    n = np.array([math.cos(th), math.sin(th)])
+    s = -2e6 * np.outer(n, n)
+    pd = meso.principal_directions(s[0, 0], s[1, 1], s[0, 1])
+    assert float(pd["s2"]) == pytest.approx(-2e6)
+    assert float(pd["s1"]) == pytest.approx(0.0, abs=1e-6)
+    assert float(pd["theta2"]) == pytest.approx(th)
+    assert meso.direction_share(np.array([th, th - math.pi, 0.0, th + 0.1]), th, math.radians(10)) == 0.75
+
+
+def test_force_segments_join_centroids_and_drop_zero_forces():
+    c = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    segs, mag = meso.force_segments(c, np.array([[0, 1], [1, 2]]), np.array([3.0, 0.0]))
+    assert segs.tolist() == [[0.0, 0.0, 1.0, 0.0]] and mag.tolist() == [3.0]
+    with pytest.raises(ValueError, match="outside"):
+        meso.force_segments(c, np.array([[0, 3]]), np.array([1.0]))
+
+
+def test_normality_accepts_a_normal_sample_and_rejects_a_skewed_one():
+    rng = np.random.default_rng(7)
+    normal = rng.normal(-3.07, 0.495, 238)  # the paper's catalogue size and law
+    r = meso.normality(normal, -3.07, 0.495)
+    # p-values of a sample from the tested law are uniform: 1e-3 fails one seed in a thousand
+    assert r["normal_at_5pct"] and r["shapiro_p"] > 1e-3 and r["ks_p"] > 1e-3
+    # the same sample shifted by one magnitude unit keeps its shape but leaves the paper's law
+    assert meso.normality(normal + 1.0, -3.07, 0.495)["ks_p"] < 1e-6
+    skewed = -3.0 + rng.exponential(0.5, 238)
+    assert not meso.normality(skewed)["normal_at_5pct"]
+    with pytest.raises(ValueError, match="at least 3"):
+        meso.normality([1.0, np.nan])
