@@ -342,6 +342,8 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
     T = response_time(sim.model)
     journal = start_journal(sim, args, out)
+    # a monitor column must exist before the history's first row, which the search writes
+    recorder = MesoRecorder(interval=T / 4).attach(sim)
     if args.gravity_factor is None:
         fos_summary = journal.once("fos", lambda: factor_of_safety(
             sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
@@ -363,7 +365,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     onset_stage = dataclasses.replace(default_trial_stage(sim), name="onset", gravity_factor=k_fail)
     slide_stage = dataclasses.replace(runout_stage(SlopeWorkflow(runout_time=args.runout_time), T, height, k_fail * G),
                                       name="slide", gravity_factor=k_fail)
-    recorder = MesoRecorder(interval=T / 4).attach(sim)
+    recorder.reset()  # what it kept during the search's trials
     stages = []
     outcome, ending = "finished", None
     try:
