@@ -237,3 +237,23 @@ def test_a_stop_in_one_run_does_not_leak_into_the_next_in_the_same_process():
     finally:  # give the test process its own handlers back
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
+
+
+def test_a_scene_file_run_resumes_from_its_own_copy_bit_identical(uninterrupted, tmp_path):
+    """``fdem run FILE.toml`` stopped by SIGTERM resumes with ``fdem run scene --resume DIR``
+    from the run's own ``scene.toml`` (the user's file is gone by then) and ends where the
+    quick-start case ends uninterrupted: the case's written scene is the same model."""
+    scene = tmp_path / "qs.toml"
+    assert fdem("run", "quick-start", "--size", "2.0", "--write-scene", str(scene)).returncode == 0
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "fdem.cli", "run", str(scene), *SCENE[2:], "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    wait_for_rows(out, proc, 40)
+    proc.send_signal(signal.SIGTERM)
+    log = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 143, log
+    scene.unlink()
+    done = fdem("run", "scene", "--resume", str(out))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert json.loads((out / "run.json").read_text())["resumed"] == 1
+    assert_same_run(uninterrupted, out)
