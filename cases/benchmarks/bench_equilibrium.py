@@ -21,8 +21,10 @@ and at the end and the fracture energy booked, and prints the ratio's trajectory
 
     NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_equilibrium.py                  # 1.0, 0.5, 0.35
     NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_equilibrium.py --sizes 1.0 --settings after
+    NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_equilibrium.py --sizes 0.18 \
+        --checkpoint runs/paper_low_fine/checkpoint.npz --name equilibrium_residual_180k   # where the residual sits
 
-Writes docs/benchmarks/equilibrium.json.
+Writes docs/benchmarks/equilibrium.json (or ``--name``).
 """
 from __future__ import annotations
 
@@ -97,6 +99,55 @@ def run_one(size: float, setting: str, tail: float) -> list[dict]:
     return recs
 
 
+def residual_map(size: float, checkpoint: str, steps: int) -> list[dict]:
+    """Where the unbalanced force of a saved state sits: the scene at ``size`` with the state of
+    ``checkpoint``, its ratio, its round-off floor estimate, and the share of the summed nodal
+    residual that each kind of node carries against its share of the nodes; then ``steps`` more
+    steps under the equilibrium damping, to see whether the ratio still moves."""
+    from fdem.solve.checkpoint import load_checkpoint
+    from fdem.solve.geostatic import unbalanced_forces
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geometry, _, topo = build("low", "fine", size)
+    sim, cracks = simulation(geometry, topo, None, pictures=False, progress=False)
+    load_checkpoint(sim, checkpoint)
+    common = dict(mesh_size=int(topo.n_triangles), threads=1, element_size_m=size, checkpoint=str(checkpoint),
+                  step=int(sim.state.step))
+    ratio, floor = unbalanced_force_ratio(sim), unbalanced_ratio_floor(sim)
+    f = np.linalg.norm(unbalanced_forces(sim), axis=1)
+    n, total = len(f), float(f.sum())
+    print(f"{checkpoint}: step {sim.state.step}, t {sim.state.time:.4g} s, ratio {ratio:.4g}, floor estimate {floor:.3g}")
+    recs = [record("unbalanced ratio of the saved state", ratio, "-", **common),
+            record("unbalanced ratio round-off floor (estimate)", floor, "-", **common)]
+    ranked = np.sort(f)[::-1]
+    groups = {f"top {q:g} % of nodes by residual": np.arange(max(1, int(n * q / 100))) for q in (0.1, 1.0, 10.0)}
+    cn = topo.crack_nodes
+    groups["nodes of inelastic crack elements"] = np.unique(cn[cracks.inelastic()].ravel())
+    groups["nodes of joint crack elements"] = np.unique(cn[topo.crack_tag > 0].ravel())
+    if sim.inertia is not None:
+        groups["density-scaled nodes"] = np.flatnonzero(sim.inertia > 1.0001 * sim.state.mass)
+    near_support = np.unique(np.flatnonzero(sim.flags != 0) // 3)
+    groups["nodes of triangles with a supported node"] = (3 * near_support[:, None] + np.arange(3)).ravel()
+    if sim.contact is not None and len(sim.contact.active):
+        watched = np.asarray(sim.contact.active)
+        groups["nodes of triangles contact watches"] = (3 * watched[:, None] + np.arange(3)).ravel()
+    for name, idx in groups.items():
+        share = float((ranked[idx] if name.startswith("top") else f[idx]).sum() / total)
+        print(f"   {name}: {idx.size / n:.2%} of the nodes carry {share:.2%} of the summed residual")
+        recs.append(record(f"share of the summed nodal residual: {name}", share, "-", node_share=idx.size / n,
+                           **common))
+    if steps > 0:
+        sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)
+        sim.run(n_steps=steps, damping=equilibrium_damping(sim), history_every=max(1, steps // 6),
+                output_every=2 ** 62, final_output=False, stage="probe")
+        later = [r["unbalanced_ratio"] for r in sim.history[-7:]]
+        print(f"   {steps} more steps: ratio {min(later):.4g} .. {max(later):.4g}, kinetic "
+              f"{sim.history[-1]['kinetic']:.3g} J/m")
+        recs.append(record(f"unbalanced ratio over {steps} more steps (max)", float(max(later)), "-", **common))
+    return recs
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=float, nargs="+", default=[1.0, 0.5, 0.35], help="element sizes [m]")
@@ -104,9 +155,18 @@ def main(argv=None) -> None:
     parser.add_argument("--tail", type=float, default=0.0,
                         help="response times to run on after the stage, to measure the ratio at rest")
     parser.add_argument("--name", default="equilibrium", help="record file name under docs/benchmarks/")
+    parser.add_argument("--checkpoint", default=None,
+                        help="map the residual of this saved state (of the scene at the one --sizes value) instead")
+    parser.add_argument("--probe-steps", type=int, default=600, help="steps run on from --checkpoint")
     args = parser.parse_args(argv)
     records = []
     t0 = time.perf_counter()
+    if args.checkpoint is not None:
+        if len(args.sizes) != 1:
+            parser.error("--checkpoint needs exactly one --sizes value: the element size the checkpoint was run at")
+        records = residual_map(args.sizes[0], args.checkpoint, args.probe_steps)
+        save(args.name, records, checkpoint=args.checkpoint, wall_seconds=time.perf_counter() - t0)
+        return
     for size in args.sizes:
         for setting in args.settings:
             records += run_one(size, setting, args.tail)
