@@ -99,6 +99,11 @@ def test_ledger_closes_through_a_reduction_schedule_with_breakage_and_contact():
     summary = run_slope_workflow(sim, wf)
     assert summary["equilibrium"] == "converged"
     assert summary["outcome"] == "failed"
+    # every history row carries the unbalanced-force ratio; the equilibrium stage ended on the
+    # row whose ratio met the limit
+    assert all("unbalanced_ratio" in row for row in sim.history)
+    eq_rows = [row for row in sim.history if row["stage"] == "equilibrium"]
+    assert eq_rows[-1]["unbalanced_ratio"] == summary["stages"][0]["unbalanced_ratio"] <= 1e-4
     assert s.cracks.broken.sum() > 0 and s.contact.n_touching > 0
     # reduced after breakage: the factor now on every interface is the failing one
     assert s.cracks.interfaces.reduction == summary["failed_at_factor"]
