@@ -4,7 +4,10 @@ to failure, step-path failure surface, micro-cracks by mode, fragments, micro-se
 The paper raised the particle density from 2560 to 25,600 kg/m^3 until the slope failed. Here
 gravity is multiplied by a factor ``k`` (same statics as a density factor, real mass in the
 dynamics) and the critical factor is found by the factor-of-safety search
-(:class:`fdem.workflow.fos.GravityIncrease`); the slope is then loaded past it and followed to rest.
+(:class:`fdem.workflow.fos.GravityIncrease`). The slide then runs on the same slope at 1 g with
+its strengths divided by the smallest failing factor ``k`` and its fracture energies by ``k^2``
+(:func:`property_sets`, ``strength_factor``: the same failure onset as at ``k g``, then real
+gravity), from a damped onset to rest; the meso views (:func:`meso_views`) read it.
 
 Crack-element properties (every choice is a keyword of :func:`property_sets`):
 
@@ -124,9 +127,21 @@ def bridge_cohesion(size: float) -> float:
 
 
 def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 10.0,
-                  joint_softening_slip: float = 1e-3, dilation_angle: float = 5.0, dilation_limit: float = 5e-3):
+                  joint_softening_slip: float = 1e-3, dilation_angle: float = 5.0, dilation_limit: float = 5e-3,
+                  strength_factor: float = 1.0):
     """Crack-element property sets at element size ``size`` [m]: calibrated rock bridges (tag 0)
-    and the paper's bedding joints (tag 1); module docstring."""
+    and the paper's bedding joints (tag 1); module docstring.
+
+    ``strength_factor`` ``k``: the slope at its critical gravity factor ``k`` seen at 1 g. Strengths
+    ``f_t``, ``c`` divided by ``k`` and fracture energies by ``k^2`` (friction, dilation and
+    penalties kept): every force of the model then scales by ``1/k`` against gravity ``k g``
+    with the full strengths, the crack laws are the same curves in ``(u/k, f/k)``, and the two
+    models move alike with displacements ``1/k`` as large at the same times, as long as the
+    displacements are small against the geometry. Past that (the slide) the weaker model moves
+    at real gravity: a slope at its limit state, not an overloaded one."""
+    if not (math.isfinite(strength_factor) and strength_factor > 0):
+        raise ValueError(f"property_sets: strength_factor must be a positive number, got {strength_factor!r}")
+    k = float(strength_factor)
     from fdem.physics.calibration import size_scaled_properties
     from fdem.physics.crack_properties import CrackProperties
 
@@ -134,7 +149,7 @@ def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 
         raise ValueError(f"property_sets: element size must be a positive length [m], got {size!r}")
     p = penalty_ratio * YOUNG
     ft_joint = JOINT_COHESION / 10
-    return {
+    sets = {
         0: size_scaled_properties(UCS / 10, bridge_cohesion(size), intact_phi, p, size, p_t=p,
                                   name="mudstone rock bridges"),
         1: CrackProperties(f_t=ft_joint, c=JOINT_COHESION, phi=JOINT_FRICTION,
@@ -142,10 +157,14 @@ def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 
                            G_II=JOINT_COHESION * ZBAR * joint_softening_slip, p_n=p, p_t=p,
                            dilation_angle=dilation_angle, dilation_limit=dilation_limit, name="bedding joints"),
     }
+    if k == 1.0:
+        return sets
+    return {t: dataclasses.replace(q, f_t=q.f_t / k, c=q.c / k, G_I=q.G_I / k ** 2, G_II=q.G_II / k ** 2)
+            for t, q in sets.items()}
 
 
 def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_dir=None, pictures: bool = True,
-          heterogeneity_seed: int = 1, progress: bool = True):
+          heterogeneity_seed: int = 1, progress: bool = True, strength_factor: float = 1.0):
     """Geometry, mesh, model in static equilibrium, crack elements, contact and the simulation.
 
     Supports as the paper: x fixed on the left and right sides, x and y fixed at the bottom."""
@@ -168,7 +187,7 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
     model.roller("left", "x")
     model.roller("right", "x")
     model.set_element_damping()
-    sets = property_sets(size)
+    sets = property_sets(size, strength_factor=strength_factor)
     cracks = CrackSet(topo, sets, contact_penalty=sets[0].p_n,
                       heterogeneity=Heterogeneity("normal", cov=0.1, seed=heterogeneity_seed, tags=(0,)))
     report = geostatic_start(model, cracks)
@@ -319,7 +338,7 @@ def build_simulation(size: float, spacing_rule: str = "pitch", above_toe: bool =
 def run_one(args, spacing_rule: str, out: Path) -> dict:
     from fdem.geometry.polygons import slope_toe
     from fdem.results.report import RunReport
-    from fdem.workflow.stages import Convergence, Stage, response_time, run_stage
+    from fdem.workflow.stages import response_time, run_stage
     from fdem.workflow.fos import GravityIncrease, factor_of_safety
     from fdem.solve.simulation import InstabilityError
     from fdem.workflow.fos import default_trial_stage
@@ -327,7 +346,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     from fdem.results.meso import MesoRecorder
 
     t0 = time.perf_counter()
-    geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures)
+    geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, False, progress=False)
     stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     cap_simulated_time(sim, args.max_time)
     use_density_scaling(sim, args.density_scaling)
@@ -339,33 +358,40 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     toe_x, floor_y = slope_toe(geometry.bodies[0])
     from fdem.results.events import MULIASHI
 
-    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
     T = response_time(sim.model)
-    journal = start_journal(sim, args, out)
-    # a monitor column must exist before the history's first row, which the search writes
-    recorder = MesoRecorder(interval=T / 4).attach(sim)
     if args.gravity_factor is None:
-        fos_summary = journal.once("fos", lambda: factor_of_safety(
+        # the search is not journaled: a resume repeats it (deterministic, 95 s at 1 m)
+        fos_summary = factor_of_safety(
             sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
             workers=args.workers, build=build_simulation,
-            build_args=(args.size, spacing_rule, not args.below_toe)).as_dict())
+            build_args=(args.size, spacing_rule, not args.below_toe)).as_dict()
         k_fail = fos_summary["bracket"][1] * (1.0 + args.overload)
         print(f"[{spacing_rule}] critical gravity factor {fos_summary['fos']:.3f} (bracket "
               f"{fos_summary['bracket'][0]:.3f}-{fos_summary['bracket'][1]:.3f}, {fos_summary['n_trials']} trials, "
-              f"{fos_summary['wall_seconds']:.0f} s); loading at k = {k_fail:.3f}")
+              f"{fos_summary['wall_seconds']:.0f} s); the slide at 1 g with strengths / {k_fail:.3f}")
     else:
         k_fail, fos_summary = args.gravity_factor, None
-    # The slide (docs/cases.md B): at the critical factor, as the paper raises the density until
-    # the slope starts to fail. First the failing trial's damped stage ("onset": fundamental-mode
-    # damping, ends when a node has moved 1 % of the model height), so that the sudden change of
-    # gravity does not ring the slope to twice its static load; then the slope workflow's
-    # undamped runout ("slide") to rest: kinetic energy below 1 % of its peak for one response
-    # time, capped at --runout-time or max(20 T, 4 sqrt(2 H / (k g))).
+    sim.close()
+    # The slide (docs/cases.md B): the failing factor k found by the search, seen at 1 g
+    # (property_sets(strength_factor=k): strengths / k, fracture energies / k^2), so that the
+    # failure starts as in the failing trial and the slide then runs at real gravity. First the
+    # failing trial's damped stage ("onset": fundamental-mode damping, ends when a node has
+    # moved 1 % of the model height), then the slope workflow's undamped runout ("slide") to
+    # rest: kinetic energy below 1 % of its peak for one response time, capped at
+    # --runout-time or max(20 T, 4 sqrt(2 H / g)).
+    geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures,
+                                       strength_factor=k_fail)
+    cap_simulated_time(sim, args.max_time)
+    use_density_scaling(sim, args.density_scaling)
+    print(f"[{spacing_rule}] at strengths / {k_fail:.3f}: {len(geo.over_strength['shear'])} elements over shear "
+          f"and {len(geo.over_strength['tensile'])} over tensile strength in the geostatic start")
+    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
+    recorder = MesoRecorder(interval=T / 4).attach(sim)  # before the history's first row
+    journal = start_journal(sim, args, out)
     height = float(geometry.bounds[3] - geometry.bounds[1])
-    onset_stage = dataclasses.replace(default_trial_stage(sim), name="onset", gravity_factor=k_fail)
-    slide_stage = dataclasses.replace(runout_stage(SlopeWorkflow(runout_time=args.runout_time), T, height, k_fail * G),
-                                      name="slide", gravity_factor=k_fail)
-    recorder.reset()  # what it kept during the search's trials
+    onset_stage = dataclasses.replace(default_trial_stage(sim), name="onset")
+    slide_stage = dataclasses.replace(runout_stage(SlopeWorkflow(runout_time=args.runout_time), T, height, G),
+                                      name="slide")
     stages = []
     outcome, ending = "finished", None
     try:
@@ -381,13 +407,13 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     if outcome != "finished":
         summary = report.write(out, pictures_on=not args.no_pictures, extra={
             "case": f"muliashi_{spacing_rule}", "outcome": outcome, "ending": ending, "size_m": args.size,
-            "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail})
+            "critical_gravity_factor": fos_summary, "strength_factor": k_fail})
         print(f"[{spacing_rule}] {ending}; resume with: fdem run muliashi --resume {args.out}")
         return summary
     meso = meso_views(out, sim, geometry, report.catalogue(), recorder, pictures=not args.no_pictures)
     summary = report.write(out, pictures_on=not args.no_pictures, extra={
         "case": f"muliashi_{spacing_rule}", "spacing_rule": spacing_rule, "joints_above_toe_only": not args.below_toe,
-        "size_m": args.size, "critical_gravity_factor": fos_summary, "loaded_gravity_factor": k_fail,
+        "size_m": args.size, "critical_gravity_factor": fos_summary, "strength_factor": k_fail,
         "stages": [r.as_dict() for r in stages], "meso": meso, "response_time_s": T, "wall_seconds": time.perf_counter() - t0,
         "time_capped": time_capped(sim), "outcome": "finished", "checkpoints": journal.writes,
         "paper": {"density_factor_reached": 10.0, "events": 238, "magnitude_mean": -3.07, "magnitude_std": 0.495,
@@ -406,12 +432,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--upper", type=float, default=12.0, help="upper end of the gravity-factor bracket")
     parser.add_argument("--tol", type=float, default=0.1, help="bracket width of the gravity-factor search")
     parser.add_argument("--overload", type=float, default=0.0,
-                        help="the slide loads at (1 + overload) times the smallest failing factor (default 0)")
+                        help="the slide runs with strengths / ((1 + overload) k_fail), k_fail the smallest failing factor")
     parser.add_argument("--runout-time", type=float, default=None,
-                        help="cap of the slide [s] (default max(20 T, 4 sqrt(2 H / (k g))))")
+                        help="cap of the slide [s] (default max(20 T, 4 sqrt(2 H / g)))")
     parser.add_argument("--workers", type=int, default=1, help="factor-of-safety trials in parallel")
     parser.add_argument("--gravity-factor", type=float, default=None,
-                        help="skip the search and load at this gravity factor")
+                        help="skip the search: the slide runs with strengths / this factor")
     add_resume_options(parser)
     args = prepare_run(parser, parser.parse_args(argv), argv, NAME, open_now=False)
     check_common(parser, args)

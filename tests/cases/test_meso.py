@@ -80,3 +80,20 @@ def test_normality_accepts_a_normal_sample_and_rejects_a_skewed_one():
     assert not meso.normality(skewed)["normal_at_5pct"]
     with pytest.raises(ValueError, match="at least 3"):
         meso.normality([1.0, np.nan])
+
+
+def test_muliashi_slide_model_divides_strengths_by_k_and_fracture_energies_by_k_squared():
+    """The slide's 1 g model of the slope at gravity factor k: forces scale by 1/k, so the crack
+    laws must be the same curves in (u/k, f/k): strengths / k, energies / k^2, friction and
+    penalties kept; the snap-back margin G f_t^-2 is then unchanged."""
+    from fdem.cases.muliashi import property_sets
+
+    base, weak = property_sets(1.0), property_sets(1.0, strength_factor=4.0)
+    for tag in (0, 1):
+        b, w = base[tag], weak[tag]
+        assert (w.f_t, w.c) == pytest.approx((b.f_t / 4, b.c / 4))
+        assert (w.G_I, w.G_II) == pytest.approx((b.G_I / 16, b.G_II / 16))
+        assert (w.phi, w.p_n, w.p_t) == (b.phi, b.p_n, b.p_t)
+        assert w.G_I / w.f_t ** 2 == pytest.approx(b.G_I / b.f_t ** 2)
+    with pytest.raises(ValueError, match="strength_factor"):
+        property_sets(1.0, strength_factor=0.0)
