@@ -230,6 +230,8 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
 
     toe = np.array(slope_toe(geometry.bodies[0]))
     result: dict = {"min_assembly_triangles": min_triangles, "first_breaks": n_first}
+    b = geometry.bounds
+    view = (b[0] - 10.0, b[2] + 1.0, b[1] - 1.0, b[3] + 1.0)  # the model and 10 m of runout beyond its edge
 
     # initiation order
     ev = cracks.events
@@ -291,7 +293,7 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
             frames.append((snap.x, asm, f"t = {snap.time:.3f} s, {rows[-1]['broken']} broken"))
         result["fragments"] = rows
         if pictures:
-            mp.fragment_maps(out / "meso_fragments.png", frames, tri, min_triangles)
+            mp.fragment_maps(out / "meso_fragments.png", frames, tri, min_triangles, extent=view)
     # force chains and principal directions before and during sliding
     if snaps:
         before = snaps[0]
@@ -326,7 +328,7 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
                 "bridge_force_elsewhere_N_per_m": float(far.mean()) if far.size else math.nan,
                 "contact_pairs": int(km.size), "contact_force_max_N_per_m": float(km.max()) if km.size else 0.0}
         if pictures:
-            mp.force_chain_maps(out / "meso_forces.png", panels, tri)
+            mp.force_chain_maps(out / "meso_forces.png", panels, tri, extent=view)
     return result
 
 

@@ -134,11 +134,19 @@ def magnitude_histogram(path: str | os.PathLike | None, magnitudes, reference: d
     return finish(fig, path, dpi)
 
 
-def fragment_maps(path: str | os.PathLike | None, frames, triangles, min_triangles: int, dpi: int = 120):
+def _extent(ax, extent):
+    if extent is not None:
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+
+
+def fragment_maps(path: str | os.PathLike | None, frames, triangles, min_triangles: int, dpi: int = 120,
+                  extent=None):
     """One panel per frame ``(x, assembly, title)``: triangles coloured by assembly
     (``assembly`` (n_tri,) from :func:`fdem.results.meso.assemblies`, -1 for debris below
     ``min_triangles`` triangles, drawn white with a grey edge); the largest assembly (0, the
-    ground the slope stands on) light grey."""
+    ground the slope stands on) light grey. ``extent`` ``(x0, x1, y0, y1)`` [m] fixes the view
+    (debris that left the model is then out of the picture)."""
     from matplotlib import colormaps
 
     frames = list(frames)
@@ -153,18 +161,21 @@ def fragment_maps(path: str | os.PathLike | None, frames, triangles, min_triangl
         colours[a == 0] = (0.85, 0.85, 0.85, 1.0)
         colours[a < 0] = (1.0, 1.0, 1.0, 1.0)
         _mesh(ax, x, triangles, colours=colours, edgecolor="0.6", lw=0.15)
+        _extent(ax, extent)
         ax.set_title(f"{title}\n{int(a.max()) if a.size else 0} assemblies besides the ground; "
                      f"debris (< {min_triangles} triangles) white", fontsize=8)
     fig.tight_layout()
     return finish(fig, path, dpi)
 
 
-def force_chain_maps(path: str | os.PathLike | None, frames, triangles, dpi: int = 120, max_ticks: int = 400):
+def force_chain_maps(path: str | os.PathLike | None, frames, triangles, dpi: int = 120, max_ticks: int = 400,
+                     extent=None):
     """One panel per frame, a dict with ``x`` (node positions [m]), ``title``, ``contact``
     ``(segments, magnitude [N/m])``, ``crack`` ``(segments, magnitude [N/m])`` (compressive force
     carried by intact crack elements), ``centroids`` (n_tri, 2), ``theta2`` [rad] and ``s2`` [Pa]
     (most compressive principal stress). Line width grows with the force (the largest of the
-    panel 3 pt); black ticks along ``theta2`` on an even sample of triangles, length by ``|s2|``."""
+    panel 3 pt); black ticks along ``theta2`` on an even sample of triangles, length by ``|s2|``;
+    ``extent`` as :func:`fragment_maps`."""
     frames = list(frames)
     if not frames:
         raise ValueError("force_chain_maps needs at least one frame")
@@ -185,6 +196,7 @@ def force_chain_maps(path: str | os.PathLike | None, frames, triangles, dpi: int
         ticks = np.hstack([c[pick] - half, c[pick] + half])
         _lines(ax, ticks, colors="k", linewidths=0.9,
                label=f"most compressive stress direction (|s2| up to {np.max(np.abs(s2)) / 1e6:.2f} MPa)")
+        _extent(ax, extent)
         ax.legend(loc="lower right", fontsize=7)
         ax.set_title(f["title"], fontsize=9)
     fig.tight_layout()
