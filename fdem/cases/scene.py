@@ -198,8 +198,9 @@ def run_scene(parser, args, scene: dict) -> dict:
     finish_run(out, summary)
     if summary["outcome"] != "write_error":
         lo, hi = summary.get("fos_bracket") or (None, None)
+        what = "critical gravity factor" if workflow.trigger == "gravity" else "factor of safety"
         print(f"outcome {summary['outcome']}"
-              + (f", factor of safety between {lo:.3f} and {hi:.3f}" if lo is not None and hi is not None else
+              + (f", {what} between {lo:.3f} and {hi:.3f}" if lo is not None and hi is not None else
                  f", stable up to F = {lo:.3f}" if lo is not None else "")
               + (f", failed at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
               + f"; {summary['cracks']['broken']} crack elements broken; {summary['wall_seconds']:.0f} s")

@@ -117,4 +117,5 @@ def workflow(s: dict):
         fields["factors"] = tuple(w["factors"])
     if w["fos"] is not None:
         fields["fos"] = tuple(w["fos"])
+    fields["trigger"] = "gravity" if w["kind"] == "gravity-increase" else "strength"
     return SlopeWorkflow(**fields)

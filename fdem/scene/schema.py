@@ -157,13 +157,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
                     default="static", choices=("static", "none")),
     },
     "workflow": {
-        "kind": Key("str", "what the run does", default="strength-reduction", choices=("strength-reduction",)),
+        "kind": Key("str", "what the run does: strength reduction to failure, or gravity increase (fos is then the "
+                           "gravity-factor bracket, required)", default="strength-reduction",
+                    choices=("strength-reduction", "gravity-increase")),
         "reduction": Key("str", "damped steps of 10 % or the paper's rate", default="steps", choices=("steps", "rate")),
         "factors": Key("floats", "reduction factors F of the steps (default 1/0.9 ... 1/0.3)"),
         "reduction_rate": _f("fall of the strength 1/F per second (rate) [1/s]", 5.0, **POSITIVE),
         "final_strength": _f("strength 1/F the rate mode stops at [-]", 0.3, low=0.0, high=1.0, open_low=True,
                              open_high=True),
-        "fos": Key("floats", "[lower, upper, tolerance]: search the factor of safety first", length=3),
+        "fos": Key("floats", "[lower, upper, tolerance]: search the factor of safety first (gravity-increase: the "
+                             "gravity-factor bracket)", length=3),
         "equilibrium_ratio": _f("unbalanced-force ratio that counts as equilibrium [-]", 1e-4, low=0.0, high=1.0,
                                 open_low=True, open_high=True),
         "step_time": _f("cap of each damped stage [s] (default 5 response times)", **POSITIVE),

@@ -12,7 +12,8 @@ Composed of :mod:`fdem.workflow.stages` so that a case script only builds the mo
 3. **Strength reduction** until failure, either in *steps* (``F = 1/0.9, 1/0.8, ...``, each a
    damped stage that converges — stable — or fails), or at a *rate* (the four-slope paper:
    the strength falls by 10 % of its initial value per 10,000 steps of 2 us, i.e. ``1/F``
-   falls by 5 per second, undamped).
+   falls by 5 per second, undamped). With ``trigger="gravity"`` instead: gravity increase, the
+   critical gravity factor by bisection and the slide at it (:func:`_gravity_increase`).
 4. **Runout** at the factor where the slope failed: dynamic (no quasi-static damping), until
    the kinetic energy falls below a fraction of its peak and stays there for one response
    time, capped in simulated time. With ``out_dir`` the state it starts from is saved to
@@ -35,7 +36,8 @@ from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.solve.geostatic import rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
-from fdem.workflow.fos import check_bracket, factor_of_safety, fundamental_damping
+from fdem.workflow.fos import (BracketError, GravityIncrease, check_bracket, default_trial_stage, factor_of_safety,
+                               fundamental_damping)
 
 __all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures"]
@@ -69,6 +71,10 @@ class SlopeWorkflow:
         the free-fall time over the model height ``H``)
     rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
         its peak for one response time (default 0.01)
+    trigger : ``"strength"`` (strength reduction, default) or ``"gravity"``: gravity increase, the
+        loading of the bonded-particle Muliashi paper (density raised until the slope fails). With
+        ``"gravity"``, ``fos`` is the gravity-factor bracket, required; the slope then slides at
+        the bracket's failing factor (a damped onset stage, then the runout at that gravity)
     runout_dt_fraction : time-step factor of the runout stage (default 0.4; the other stages use the
         simulation's, 0.8 by default). Impacts need the smaller step: on the demo slope the runout
         distance at 0.8 was 15.5 +- 0.3 m against 14.3 +- 0.7 m at 0.4 and 13.7 m at 0.2
@@ -86,10 +92,16 @@ class SlopeWorkflow:
     runout_time: float | None = None
     rest_kinetic_ratio: float = 0.01
     runout_dt_fraction: float | None = 0.4
+    trigger: str = "strength"
 
     def __post_init__(self):
         """Every field checked, the message naming it: a negative time or displacement, an
         inverted bracket or a ratio outside (0, 1) would otherwise run and mean nothing."""
+        if self.trigger not in ("strength", "gravity"):
+            raise ValueError(f"SlopeWorkflow.trigger must be 'strength' or 'gravity', got {self.trigger!r}")
+        if self.trigger == "gravity" and self.fos is None:
+            raise ValueError("SlopeWorkflow.trigger = 'gravity' needs fos = (lower, upper, tol), the gravity-factor "
+                             "bracket of the critical factor's search")
         if self.reduction not in ("steps", "rate"):
             raise ValueError(f"SlopeWorkflow.reduction must be 'steps' or 'rate', got {self.reduction!r}")
         try:
@@ -233,6 +245,9 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
     if eq.reason != "converged":
         summary["outcome"] = "failed"
         summary["failed_at_factor"] = 1.0
+    elif wf.trigger == "gravity":
+        _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal)
+        return
     else:
         if wf.fos is not None:
             lower, upper, tol = wf.fos
@@ -273,6 +288,40 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
 
             summary["runout_checkpoint"] = journal.once("runout_start", save_start) if journal else save_start()
         record(run_stage(sim, runout_stage(wf, T, height, g), journal=journal))
+
+
+def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:
+    """The gravity-increase workflow after equilibrium: the critical gravity factor ``k`` by
+    bisection on ``wf.fos`` (:class:`fdem.workflow.fos.GravityIncrease`), then, at the bracket's
+    failing factor, a damped ``onset`` stage (the failing trial's: it ends when a node has moved
+    1 % of the model height, so the jump of gravity does not ring the slope to twice its load)
+    and the undamped runout at that gravity to rest (:func:`runout_stage` with ``k g``). A slope
+    still standing at the upper factor is ``stable``; one failing at the lower is loaded there."""
+    import dataclasses
+
+    lower, upper, tol = wf.fos
+
+    def search():
+        try:
+            return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, trigger=GravityIncrease(),
+                                    out_dir=out_dir).as_dict()
+        except BracketError as err:
+            return {"fos": None, "bracket": [upper, None] if "stable" in str(err) else [None, lower],
+                    "error": str(err)}
+
+    summary["fos"] = journal.once("fos", search) if journal is not None else search()
+    summary["trigger"] = "gravity"
+    k = summary["fos"]["bracket"][1]
+    if k is None:
+        summary["outcome"] = "stable"
+        summary["ending"] = summary["fos"]["error"]
+        return
+    summary["failed_at_factor"] = k
+    summary["outcome"] = "failed"
+    onset = dataclasses.replace(default_trial_stage(sim), name="onset", gravity_factor=k)
+    record(run_stage(sim, onset, journal=journal))
+    slide = dataclasses.replace(runout_stage(wf, T, height, k * g), gravity_factor=k)
+    record(run_stage(sim, slide, journal=journal))
 
 
 def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:

@@ -343,3 +343,35 @@ def test_an_ensemble_varies_the_scene_keys_it_names(tmp_path):
     high = realize(ens, 1, {"cracks_1_phi": 40.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
     assert low["status"] == high["status"] == "ok", (low["error"], high["error"])
     assert high["fos_lower"] >= low["fos_lower"] and high["fos"] > low["fos"]
+
+
+# ----------------------------------------------------------------------------- gravity increase
+def test_gravity_increase_matches_strength_reduction_for_frictionless_joints(tmp_path):
+    """With no friction anywhere (phi = 0 on every crack set), the stresses grow as gravity
+    ``k g`` and the strengths (c, f_t) do not, so the critical gravity factor equals the
+    strength-reduction factor of safety (limit equilibrium scales linearly), provided the
+    elements are ductile enough for limit equilibrium to hold: strength reduction divides c and
+    f_t but not the fracture energies, so it makes the elements more ductile as it goes, and
+    with the scene's brittle joints (G_II = 500 J/m^2) the two differ (F 3.81-3.97 against
+    k 2.09-2.25); with G_II = 5e4 they meet (F 4.44-4.59, k 4.28-4.44). The two scene
+    workflows' bisection brackets must overlap; then the gravity run loads the slope at the
+    bracket's failing end."""
+    from fdem.cases import scene as runner
+
+    text = (SMALL_SLOPE.replace("phi = 35.0", "phi = 0.0").replace("phi = 30.0\nG_I = 50.0", "phi = 0.0\nG_I = 50.0")
+            .replace("c = 1e5", "c = 1.5e5").replace("G_I = 50.0\nG_II = 500.0", "G_I = 5e3\nG_II = 5e4"))
+    opts = ["--no-pictures", "--quiet", "--threads", "1"]
+    strength = runner.main([str(_write(tmp_path, text + '\n[workflow]\nfos = [1.0, 6.0, 0.25]\n', "s.toml")),
+                            "--out", str(tmp_path / "s"), "--max-time", "1.5"] + opts)
+    gravity = runner.main([str(_write(tmp_path, text + '\n[workflow]\nkind = "gravity-increase"\n'
+                                                       'fos = [1.0, 6.0, 0.25]\n', "g.toml")),
+                           "--out", str(tmp_path / "g")] + opts)
+    fs, kg = strength["workflow"]["fos"]["bracket"], gravity["workflow"]["fos"]["bracket"]
+    assert fs[1] - fs[0] <= 0.25 and kg[1] - kg[0] <= 0.25
+    assert kg[0] <= fs[1] and fs[0] <= kg[1], (fs, kg)  # the brackets overlap
+    stages = [s["name"] for s in gravity["workflow"]["stages"]]
+    assert stages == ["equilibrium", "onset", "runout"] and gravity["failed_at_factor"] == kg[1]
+    # loaded at the bracket's failing end the slope does not settle (the onset fails or is capped
+    # still moving, as the search's failing trial was) and moves more than 1 % of its height (13 m)
+    assert gravity["workflow"]["stages"][1]["reason"] in ("failed", "capped")
+    assert gravity["runout"]["max_displacement_m"] >= 0.01 * 13.0
