@@ -164,10 +164,13 @@ def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 
 
 
 def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_dir=None, pictures: bool = True,
-          heterogeneity_seed: int = 1, progress: bool = True, strength_factor: float = 1.0):
+          heterogeneity_seed: int = 1, progress: bool = True, strength_factor: float = 1.0, wall: bool = False):
     """Geometry, mesh, model in static equilibrium, crack elements, contact and the simulation.
 
-    Supports as the paper: x fixed on the left and right sides, x and y fixed at the bottom."""
+    Supports as the paper: x fixed on the left and right sides, x and y fixed at the bottom.
+    ``wall``: a fixed rigid body 1 m thick, 0.1 m left of the model and as high as it, which the
+    debris meets as the paper's particles meet its left wall (without it debris past the 15.5 m
+    floor falls off the model and never comes to rest)."""
     from fdem.physics.cracks import CrackSet
     from fdem.physics.heterogeneity import Heterogeneity
     from fdem.physics.contact import ContactSet
@@ -180,12 +183,25 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
     from fdem.mesh.topology import build_topology
 
     geometry = muliashi_geometry(spacing_rule, above_toe)
+    if wall:
+        from fdem.geometry.polygons import rectangle
+
+        x0, y0, x1, y1 = geometry.bounds
+        geometry = Geometry([*geometry.bodies, rectangle(x0 - 1.1, y0, 1.0, y1 - y0, name="wall")],
+                            list(geometry.joint_sets), min_joint_length=geometry.min_joint_length)
     topo = build_topology(mesh_geometry(geometry, size))
     model = Model(topo, ElasticMaterial(young=YOUNG, poisson=POISSON, density=DENSITY))
     model.set_gravity(0.0, -9.81)
-    model.fix("bottom")
-    model.roller("left", "x")
-    model.roller("right", "x")
+    if wall:  # the sides by coordinates: the mesh's "left" is now the wall's
+        eps = 1e-6
+        model.fix(lambda x, y: x < x0 - 0.05)
+        model.fix(lambda x, y: (y < y0 + eps) & (x > x0 - 0.05))
+        model.roller(lambda x, y: np.abs(x - x0) < eps, "x")
+        model.roller(lambda x, y: np.abs(x - x1) < eps, "x")
+    else:
+        model.fix("bottom")
+        model.roller("left", "x")
+        model.roller("right", "x")
     model.set_element_damping()
     sets = property_sets(size, strength_factor=strength_factor)
     cracks = CrackSet(topo, sets, contact_penalty=sets[0].p_n,
@@ -382,7 +398,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     # rest: kinetic energy below 1 % of its peak for one response time, capped at
     # --runout-time or max(20 T, 4 sqrt(2 H / g)).
     geometry, sim, cracks, geo = build(args.size, spacing_rule, not args.below_toe, out, not args.no_pictures,
-                                       strength_factor=k_fail)
+                                       strength_factor=k_fail, wall=True)
     cap_simulated_time(sim, args.max_time)
     use_density_scaling(sim, args.density_scaling)
     print(f"[{spacing_rule}] at strengths / {k_fail:.3f}: {len(geo.over_strength['shear'])} elements over shear "
