@@ -42,6 +42,12 @@ QUICK = {
     "planar_failure": (["--size", "2.0", "--geometry", "no_crack", "--tol", "0.5", "--max-time", "0.01",
                         "--no-pictures"], ["planar_failure.json"], "planar_failure.json"),
     "newmark_block": (["--size", "1.0", "--max-time", "0.02", "--no-pictures"], ["newmark.json"], "newmark.json"),
+    # the calibration scenes at their coarsest mesh, a few hundred steps (their verification rows
+    # are tests/verification/test_calibration.py)
+    "compression_test": (["--size", "0.008", "--max-time", "2e-4", "--no-pictures", "--quiet"],
+                         ["summary.json", "stress_strain.csv"], "summary.json"),
+    "direct_shear": (["--size", "0.0125", "--normal-stresses", "1e6", "2e6", "--max-time", "2e-4", "--no-pictures",
+                      "--quiet"], ["summary.json", "shear_curves.csv"], "summary.json"),
     "ensemble": (["--n", "1", "--workers", "1", "--size", "3.0", "--max-time", "0.01", "--no-pictures"],
                  ["realizations.csv", "ensemble.json", "summary.json"], "summary.json"),
 }
