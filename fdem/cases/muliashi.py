@@ -289,6 +289,7 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
     snaps = recorder.snapshots
     area = np.abs(topo.triangle_area0)
     yc0 = x0[tri][:, :, 1].mean(axis=1)
+    slope = topo.triangle_body == 0
     bt = cracks.break_time()
     if len(ev) and snaps:
         times = np.sort(ev["time"])
@@ -297,7 +298,8 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
             t_at = float(times[max(0, int(math.ceil(share * times.size)) - 1)])
             snap = next((sn for sn in snaps if sn.time >= t_at), snaps[-1])
             _, label = meso.fragments_at(topo, bt, snap.time)
-            asm = meso.assemblies(label, area, min_triangles)
+            asm = np.full(topo.n_triangles, -1, dtype=np.int64)  # the wall (body 1) is no assembly
+            asm[slope] = meso.assemblies(label[slope], area[slope], min_triangles)
             table = meso.assembly_table(asm, area, yc0)
             rest = slice(1, None)  # 0 is the largest: the ground
             rows.append({"time_s": snap.time, "broken": int(np.sum(bt <= snap.time)),
@@ -305,7 +307,7 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
                          "largest_besides_ground_m2": float(table["area"][rest].max()) if table["area"].size > 1 else 0.0,
                          "mean_formed_elevation_m": float(np.average(table["y"][rest], weights=table["area"][rest]))
                          if table["area"].size > 1 else math.nan,
-                         "debris_triangles": int(np.sum(asm < 0))})
+                         "debris_triangles": int(np.sum((asm < 0) & slope))})
             frames.append((snap.x, asm, f"t = {snap.time:.3f} s, {rows[-1]['broken']} broken"))
         result["fragments"] = rows
         if pictures:
