@@ -26,8 +26,8 @@ Crack-element properties (every choice is a keyword of :func:`property_sets`):
   smooth joints dilate, its value is lost in the source);
 * penalties ``p_n = p_t = 10 E`` (Munjiza's alpha = 10, the tangential tied to the normal).
 
-    python cases/muliashi.py --out runs/muliashi                      # both readings of the spacing
-    python cases/muliashi.py --spacing-rule gap --size 0.4 --out runs/muliashi_gap
+    python cases/muliashi.py --out runs/muliashi                      # pitch reading, 1.0 m: docs/cases.md B
+    python cases/muliashi.py --spacing-rule both --out runs/muliashi_both
 """
 from __future__ import annotations
 
@@ -445,12 +445,19 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 
 
 def main(argv=None) -> dict:
-    parser = case_parser(__doc__, "runs/muliashi", 0.6, "element size [m] (default 0.6)", name=NAME)
-    parser.add_argument("--spacing-rule", choices=["pitch", "gap", "both"], default="both",
-                        help="read the 3 m joint spacing as start-to-start pitch or as the gap (default both)")
+    # defaults: the run of docs/cases.md B. At 0.6 m the slope weakened by its failing factor
+    # settles instead of sliding (the search loads from the 1 g state, the slide model starts
+    # from a geostatic state at the reduced strength), so the default size is 1.0 m; the
+    # critical factor is about 20 (pitch) and 39 (gap), so the bracket reaches 80.
+    parser = case_parser(__doc__, "runs/muliashi", 1.0, "element size [m] (default 1.0)", name=NAME)
+    parser.add_argument("--spacing-rule", choices=["pitch", "gap", "both"], default="pitch",
+                        help="read the 3 m joint spacing as start-to-start pitch (default: the paper's figure) "
+                             "or as the gap, or both")
     parser.add_argument("--below-toe", action="store_true", help="also build the joints below the toe's elevation")
-    parser.add_argument("--upper", type=float, default=12.0, help="upper end of the gravity-factor bracket")
-    parser.add_argument("--tol", type=float, default=0.1, help="bracket width of the gravity-factor search")
+    parser.add_argument("--upper", type=float, default=80.0,
+                        help="upper end of the gravity-factor bracket (default 80; the critical factor is about "
+                             "20 for pitch, 39 for gap at 1.0 m)")
+    parser.add_argument("--tol", type=float, default=1.25, help="bracket width of the gravity-factor search (default 1.25)")
     parser.add_argument("--overload", type=float, default=0.0,
                         help="the slide runs with strengths / ((1 + overload) k_fail), k_fail the smallest failing factor")
     parser.add_argument("--runout-time", type=float, default=None,
