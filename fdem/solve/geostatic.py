@@ -544,6 +544,21 @@ def geostatic_start(model, cracks=None, replace: bool = False) -> GeostaticRepor
 
 
 # --------------------------------------------------------------------------- 4. convergence measure
+@njit(fastmath=FASTMATH, cache=True, inline="always")
+def _net_force(r, k, n, m, gx, gy, f_int, f_ext, flags):
+    """``(fx, fy)`` [N/m]: the unbalanced force of corner ``k`` (node ``n``) of a triangle of
+    mass share ``m``: its response ``r`` at the current state, gravity on the real mass,
+    interaction and external force; a supported component is zero. The one statement of the
+    net force for the ratio (:func:`unbalanced_force_ratio`) and its map (:func:`unbalanced_forces`)."""
+    fx = r[2 * k] + m * gx + f_int[n, 0] + f_ext[n, 0]
+    fy = r[2 * k + 1] + m * gy + f_int[n, 1] + f_ext[n, 1]
+    if flags[n] & 1:
+        fx = 0.0
+    if flags[n] & 2:
+        fy = 0.0
+    return fx, fy
+
+
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
 def _unbalanced_nodal_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscous, out):
     """``out[n] = f_net`` [N/m] of every node of an exploded mesh (node ``3t+k``): triangle force at
@@ -554,11 +569,7 @@ def _unbalanced_nodal_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscou
                               v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1], use_viscous)
         m = tc[t, TC_MASS]
         for k in range(3):
-            n = i + k
-            fx = r[2 * k] + m * gx + f_int[n, 0] + f_ext[n, 0]
-            fy = r[2 * k + 1] + m * gy + f_int[n, 1] + f_ext[n, 1]
-            out[n, 0] = 0.0 if flags[n] & 1 else fx
-            out[n, 1] = 0.0 if flags[n] & 2 else fy
+            out[i + k, 0], out[i + k, 1] = _net_force(r, k, i + k, m, gx, gy, f_int, f_ext, flags)
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
@@ -573,13 +584,7 @@ def _unbalanced_exploded(x, v, tc, f_int, f_ext, flags, gx, gy, use_viscous):
                               v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1], use_viscous)
         m = tc[t, TC_MASS]
         for k in range(3):
-            n = i + k
-            fx = r[2 * k] + m * gx + f_int[n, 0] + f_ext[n, 0]
-            fy = r[2 * k + 1] + m * gy + f_int[n, 1] + f_ext[n, 1]
-            if flags[n] & 1:
-                fx = 0.0
-            if flags[n] & 2:
-                fy = 0.0
+            fx, fy = _net_force(r, k, i + k, m, gx, gy, f_int, f_ext, flags)
             num += math.sqrt(fx * fx + fy * fy)
             den += m * g
     return num, den
