@@ -47,7 +47,7 @@ __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
            "prepare_run", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
            "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report",
-           "add_write_scene_option", "write_case_scene"]
+           "add_write_scene_option", "write_case_scene", "add_number_options"]
 
 CONFIRM_ABOVE_HOURS = 12.0
 """A run whose estimated wall time is above this asks for ``--yes`` (refused without it when no
@@ -92,6 +92,14 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
                         help="replace the earlier run in --out (its frames, pictures, checkpoints and summary)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars, only warnings and the result")
     return parser
+
+
+def add_number_options(parser: argparse.ArgumentParser, defaults: dict, rows) -> None:
+    """One ``--option`` (a float) per row ``(option, key, unit, meaning)``, defaulting to
+    ``defaults[key]``, its help saying the meaning, the unit and the default: the material and
+    strength options of the calibration scenes."""
+    for opt, key, unit, what in rows:
+        parser.add_argument(opt, type=float, default=defaults[key], help=f"{what} [{unit}] (default {defaults[key]:g})")
 
 
 def add_write_scene_option(parser: argparse.ArgumentParser) -> None:

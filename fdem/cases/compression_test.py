@@ -45,7 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import case_parser, check_common, finish_run, open_run, prepare_run, set_threads
+from fdem.cases.common import (add_number_options, case_parser, check_common, finish_run, open_run, prepare_run,
+                               set_threads)
 from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "Specimen", "DEFAULTS", "check_specimen", "calibrate", "mohr_coulomb_ucs", "mohr_coulomb_strength",
@@ -266,7 +267,7 @@ def run(spec: Specimen | None = None, v_platen: float | None = None, out_dir: Pa
     cracks = CrackSet(topo, {0: props}, heterogeneity=het)  # snap-back is refused here, before any step
     tol = 1e-6 * W
     x0 = topo.x0
-    bottom = model.fix(lambda x, y: y < tol, x=False, y=True)
+    model.fix(lambda x, y: y < tol, x=False, y=True)
     mid = np.flatnonzero(np.abs(x0[:, 1]) < tol)
     centre = x0[mid[np.argmin(np.abs(x0[mid, 0] - W / 2))], 0]
     model.fix(lambda x, y: (y < tol) & (np.abs(x - centre) < tol), x=True, y=False)  # no rigid drift
@@ -394,7 +395,7 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
     d = DEFAULTS
     parser.add_argument("--width", type=float, default=d["width"], help=f"specimen width W [m]; height 2 W "
                                                                         f"(default {d['width']:g})")
-    for opt, key, unit, what in (("--young", "young", "Pa", "Young's modulus E of the triangles"),
+    add_number_options(parser, d, (("--young", "young", "Pa", "Young's modulus E of the triangles"),
                                  ("--poisson", "poisson", "-", "Poisson's ratio"),
                                  ("--density", "density", "kg/m^3", "density"),
                                  ("--f-t", "f_t", "Pa", "tensile strength f_t of the crack elements"),
@@ -404,8 +405,7 @@ def _add_options(parser: argparse.ArgumentParser) -> None:
                                  ("--tangential-ratio", "tangential_ratio", "-", "tangential penalty p_t / p_n"),
                                  ("--confinement", "confinement", "Pa", "lateral pressure sigma_3 (0: uniaxial)"),
                                  ("--strength-cov", "strength_cov", "-",
-                                  "coefficient of variation of normal element strengths (0: uniform)")):
-        parser.add_argument(opt, type=float, default=d[key], help=f"{what} [{unit}] (default {d[key]:g})")
+                                  "coefficient of variation of normal element strengths (0: uniform)")))
     for opt, key, what in (("--g-i", "g_i", "mode-I"), ("--g-ii", "g_ii", "mode-II")):
         parser.add_argument(opt, type=_energy, default=d[key],
                             help=f"{what} fracture energy [J/m^2], or 'auto': the snap-back-free rule at the element "

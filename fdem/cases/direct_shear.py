@@ -39,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fdem.cases.common import case_parser, check_common, finish_run, open_run, prepare_run, set_threads
+from fdem.cases.common import (add_number_options, case_parser, check_common, finish_run, open_run, prepare_run,
+                               set_threads)
 from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "Joint", "DEFAULTS", "NORMAL_STRESSES", "check_joint", "shear_box_mesh", "run", "run_series",
@@ -283,7 +284,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = case_parser(__doc__, name=NAME, out="runs/direct_shear", size=d["size"],
                          size_help=f"element size h [m] (default {d['size']:g}; at most length / {MIN_DIVISIONS})")
     parser.add_argument("--length", type=float, default=d["length"], help=f"joint length L [m] (default {d['length']:g})")
-    for opt, key, unit, what in (("--young", "young", "Pa", "Young's modulus E of the blocks"),
+    add_number_options(parser, d, (("--young", "young", "Pa", "Young's modulus E of the blocks"),
                                  ("--poisson", "poisson", "-", "Poisson's ratio"),
                                  ("--density", "density", "kg/m^3", "density"),
                                  ("--f-t", "f_t", "Pa", "tensile strength f_t of the joint"),
@@ -292,8 +293,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                                  ("--g-i", "g_i", "J/m^2", "mode-I fracture energy G_I of the joint"),
                                  ("--g-ii", "g_ii", "J/m^2", "mode-II fracture energy G_II of the joint"),
                                  ("--penalty-ratio", "penalty_ratio", "-", "normal penalty p_n / E"),
-                                 ("--tangential-ratio", "tangential_ratio", "-", "tangential penalty p_t / p_n")):
-        parser.add_argument(opt, type=float, default=d[key], help=f"{what} [{unit}] (default {d[key]:g})")
+                                 ("--tangential-ratio", "tangential_ratio", "-", "tangential penalty p_t / p_n")))
     parser.add_argument("--phi-res", type=float, default=None, help="residual friction angle [deg] (default --phi)")
     parser.add_argument("--normal-stresses", type=float, nargs="+", default=list(NORMAL_STRESSES), metavar="PA",
                         help="normal stresses [Pa], one test each (default 0.5e6 1e6 2e6)")
