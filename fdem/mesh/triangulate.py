@@ -181,7 +181,8 @@ def mesh_geometry(geometry: Geometry, size: float, refine_near_joints: float | N
         warnings.warn(
             f"{report.n_below_warning(min_angle_warning)} triangle(s) have an angle below "
             f"{min_angle_warning:g} deg (worst {report.min_angle_deg:.2f} deg at "
-            f"{tuple(np.round(report.worst[0][2], 3))}), usually near sharp joint crossings", stacklevel=2)
+            f"({float(report.worst[0][2][0]):.3f}, {float(report.worst[0][2][1]):.3f})), usually near sharp joint "
+            "crossings", stacklevel=2)
     return mesh
 
 
