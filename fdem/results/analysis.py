@@ -209,16 +209,22 @@ def failure_surface(topology: Topology, x: np.ndarray, broken: np.ndarray, slipp
 
 
 def fragment_statistics(topology: Topology, broken: np.ndarray, bins_per_decade: int = 4,
-                        n_largest: int = 10) -> dict:
+                        n_largest: int = 10, exclude: np.ndarray | None = None) -> dict:
     """Fragments: connected groups of triangles still bonded by unbroken crack elements.
+
+    ``exclude`` (n_tri,) bool: triangles that are not rock and count as no fragment, e.g. a
+    fixed wall the debris meets (``RunReport`` passes the triangles of bodies whose every node
+    is fixed). They are cut from the bond graph before the groups are found, so a fixed body
+    neither counts itself nor joins two rock groups through its own elements.
 
     Returns a dict:
 
-    * ``n_fragments``: all groups, single triangles included;
+    * ``n_fragments``: all groups of rock, single triangles included;
     * ``n_single_triangles``: groups of one triangle (counted apart: at the mesh scale they are
       debris, not blocks); ``n_blocks``: groups of two triangles or more;
     * ``label`` (n_tri,) fragment of each triangle; ``areas`` (n_fragments,) reference area of
-      each fragment by label [m^2 per metre]; ``n_triangles`` (n_fragments,) triangles per fragment;
+      each fragment by label [m^2 per metre] (``label`` -1 for excluded triangles);
+      ``n_triangles`` (n_fragments,) triangles per fragment;
     * ``largest``: the ``n_largest`` largest areas, descending; ``largest_share``: the largest
       fragment's share of the total area;
     * ``hist_edges``, ``hist_counts``: number of fragments per log-spaced area bin
@@ -227,9 +233,20 @@ def fragment_statistics(topology: Topology, broken: np.ndarray, bins_per_decade:
     broken = np.asarray(broken, dtype=bool)
     if broken.shape != (topology.n_cracks,):
         raise ValueError(f"broken must have shape ({topology.n_cracks},), got {broken.shape}")
-    n, label = fragments(topology, broken)
-    areas = fragment_areas(topology, label)
-    counts = np.bincount(label, minlength=n)
+    rock = np.ones(topology.n_triangles, bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    if rock.shape != (topology.n_triangles,):
+        raise ValueError(f"exclude must have shape ({topology.n_triangles},), got {rock.shape}")
+    if not rock.any():
+        raise ValueError("fragment_statistics: every triangle is excluded, no rock left to count")
+    ct = topology.crack_triangles
+    _, label = fragments(topology, broken | ~(rock[ct[:, 0]] & rock[ct[:, 1]]))
+    # renumber the groups of rock 0..n-1 (in the order of their old labels); excluded triangles -1
+    groups, label_rock = np.unique(label[rock], return_inverse=True)
+    n = groups.size
+    label = np.full(topology.n_triangles, -1, dtype=np.int64)
+    label[rock] = label_rock
+    areas = np.bincount(label[rock], weights=topology.triangle_area0[rock], minlength=n)
+    counts = np.bincount(label[rock], minlength=n)
     lo = np.floor(np.log10(areas.min()) * bins_per_decade)
     hi = np.ceil(np.log10(areas.max()) * bins_per_decade)
     edges = 10.0 ** (np.arange(lo, max(hi, lo + 1) + 1) / bins_per_decade)

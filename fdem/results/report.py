@@ -29,11 +29,25 @@ from fdem.results import analysis, events, overburden
 from fdem.io import animation, pictures
 from fdem.solve.simulation import Simulation
 
-__all__ = ["EQUILIBRIUM_STAGES", "RunReport"]
+__all__ = ["EQUILIBRIUM_STAGES", "RunReport", "fixed_body_triangles"]
 
 
 EQUILIBRIUM_STAGES = ("equilibrium", "geostatic")
 """Stage names whose last state is the geostatic state the stress map shows."""
+
+
+def fixed_body_triangles(model) -> np.ndarray:
+    """(n_tri,) bool: the triangles of bodies (``topology.triangle_body``) whose every node is
+    fixed in x and y, e.g. a rigid wall the debris meets. They are supports, not rock: the
+    fragment counts leave them out."""
+    from fdem.solve.model import FIX_X, FIX_Y
+
+    topo = model.topology
+    body = np.asarray(topo.triangle_body)
+    fixed_node = (model.flags & (FIX_X | FIX_Y)) == (FIX_X | FIX_Y)
+    free_body = np.zeros(int(body.max(initial=-1)) + 1, bool)
+    np.logical_or.at(free_body, body, ~fixed_node[topo.triangles].all(axis=1))
+    return ~free_body[body]
 
 
 class RunReport:
@@ -66,6 +80,7 @@ class RunReport:
         self.toe_x, self.toward, self.threshold = float(toe_x), float(toward), float(threshold)
         self.floor_y = floor_y
         self.reference_events = reference_events
+        self.fixed = fixed_body_triangles(sim.model)  # a fixed wall is no fragment
         if stress_drop is None:
             stress_drop = float(np.mean([p.f_t for p in self.cracks.property_sets.values()]))
         self.stress_drop = float(stress_drop)
@@ -97,7 +112,8 @@ class RunReport:
             def n_fragments(s):
                 n_broken = int(cracks.broken.sum())
                 if n_broken != self._frag_cache[0]:  # recount only when something broke
-                    self._frag_cache = (n_broken, int(analysis.fragments(topo, cracks.broken)[0]))
+                    n = analysis.fragment_statistics(topo, cracks.broken, exclude=self.fixed)["n_fragments"]
+                    self._frag_cache = (n_broken, n)
                 return float(self._frag_cache[1])
 
             sim.add_monitor("fragments", n_fragments)
@@ -115,7 +131,7 @@ class RunReport:
         sim, topo, cracks = self.sim, self.sim.model.topology, self.cracks
         x = sim.state.x
         run = analysis.runout(topo, x, self.toe_x, threshold=self.threshold, toward=self.toward)
-        frag = analysis.fragment_statistics(topo, cracks.broken)
+        frag = analysis.fragment_statistics(topo, cracks.broken, exclude=self.fixed)
         hist = sim.history
         peak = max((max(r.get("kinetic_peak", 0.0), r.get("kinetic", 0.0)) for r in hist), default=0.0)
         cat = self.catalogue()
@@ -180,7 +196,7 @@ class RunReport:
         if not cat.empty and len(cat.events) >= 2:
             written.append(events.magnitude_plot(out / "magnitudes.png", cat.magnitudes,
                                                    reference=self.reference_events))
-        frag = analysis.fragment_statistics(topo, cracks.broken)
+        frag = analysis.fragment_statistics(topo, cracks.broken, exclude=self.fixed)
         if len(frag["areas"]):
             t_f, n_f = (analysis.history_columns(sim.history, "time", "fragments")
                         if sim.history and "fragments" in sim.history[0] else (None, None))

@@ -97,3 +97,45 @@ def test_muliashi_slide_model_divides_strengths_by_k_and_fracture_energies_by_k_
         assert w.G_I / w.f_t ** 2 == pytest.approx(b.G_I / b.f_t ** 2)
     with pytest.raises(ValueError, match="strength_factor"):
         property_sets(1.0, strength_factor=0.0)
+
+
+def test_fragment_statistics_leaves_out_excluded_triangles_and_their_bonds():
+    """A strip of five 1 m cells whose middle cell is excluded (a fixed support): intact, the
+    strip is two rock fragments of 2 m^2 each; the support's own bonds do not join them."""
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.results.analysis import fragment_statistics
+
+    topo = build_topology(structured_rectangle(5, 1, 5.0, 1.0))
+    xc = topo.x0[topo.triangles].mean(axis=1)[:, 0]
+    support = (xc > 2.0) & (xc < 3.0)
+    intact = np.zeros(topo.n_cracks, bool)
+    assert fragment_statistics(topo, intact)["n_fragments"] == 1  # everything counted: one body
+    s = fragment_statistics(topo, intact, exclude=support)
+    assert s["n_fragments"] == 2 and s["n_blocks"] == 2 and s["n_single_triangles"] == 0
+    assert s["areas"] == pytest.approx([2.0, 2.0]) and s["largest_share"] == pytest.approx(0.5)
+    assert np.all(s["label"][support] == -1) and set(s["label"][~support]) == {0, 1}
+    assert s["hist_counts"].sum() == 2
+    every = fragment_statistics(topo, np.ones(topo.n_cracks, bool), exclude=support)
+    assert every["n_fragments"] == every["n_single_triangles"] == 8  # 10 triangles less the support's 2
+    with pytest.raises(ValueError, match=r"exclude must have shape \(10,\)"):
+        fragment_statistics(topo, intact, exclude=support[:3])
+
+
+def test_muliashi_fixed_wall_is_no_fragment():
+    """The slide model's left wall (a body fixed in x and y at every node) is a support: the
+    run's fragment count is the slope alone, intact one fragment, fully broken one per triangle."""
+    from fdem.cases.muliashi import build
+    from fdem.results.analysis import fragment_statistics
+    from fdem.results.report import RunReport, fixed_body_triangles
+
+    _, sim, cracks, _ = build(2.0, wall=True, progress=False, pictures=False)
+    topo = sim.model.topology
+    wall = topo.triangle_body == 1
+    assert wall.any() and np.array_equal(fixed_body_triangles(sim.model), wall)
+    assert fragment_statistics(topo, cracks.broken)["n_fragments"] == 2  # the slope and the wall
+    frag = RunReport(sim, toe_x=10.0).summary()["fragments"]
+    assert frag["n_fragments"] == frag["n_blocks"] == 1 and frag["largest_share"] == 1.0
+    every = fragment_statistics(topo, np.ones(topo.n_cracks, bool), exclude=wall)
+    assert every["n_fragments"] == every["n_single_triangles"] == int((~wall).sum())
+    sim.close()
