@@ -228,6 +228,8 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
       face whose most compressive stress lies within 15 deg of the face (65 deg); during the
       slide (the kept state nearest the kinetic-energy peak) the mean compressive force of
       intact rock-bridge elements within 1 m of a joint tip against the others [N/m];
+    * floor: :func:`fdem.results.meso.floor_cracking`, the broken elements below the toe's
+      elevation (in front of the toe and under the slope) and how deep;
     * magnitudes: :func:`fdem.results.meso.normality` against the paper's N(-3.07, 0.495).
     """
     from fdem.io import meso_pictures as mp
@@ -272,6 +274,10 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
         if pictures:
             mp.initiation_map(out / "meso_initiation.png", x0, tri, seg0[sel["element"]], init["rank"],
                               time=sel["time"], joints=joints)
+    # cracking below the toe: the floor in front of it and the ground under the slope
+    mid0 = 0.5 * (seg0[:, :2] + seg0[:, 2:])
+    in_slope = topo.triangle_body[topo.crack_triangles[:, 0]] == 0
+    result["floor"] = meso.floor_cracking(mid0[in_slope], cracks.broken[in_slope], toe)
     # events
     if not catalogue.empty:
         e = catalogue.events
@@ -322,7 +328,6 @@ def meso_views(out: Path, sim, geometry: Geometry, catalogue, recorder, pictures
         c0 = x0[tri].mean(axis=1)
         near_face = (np.abs((c0 - toe) @ fn) < 2.0) & (c0[:, 1] > toe[1]) & (c0[:, 1] < toe[1] + 15.0)
         tip_near = np.zeros(topo.n_cracks, bool)
-        mid0 = 0.5 * (seg0[:, :2] + seg0[:, 2:])
         for t in tips:
             tip_near |= np.linalg.norm(mid0 - t, axis=1) < 1.0
         bridge = topo.crack_tag == 0

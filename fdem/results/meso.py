@@ -14,6 +14,8 @@ Everything but :class:`MesoRecorder` is a plain function of arrays:
   compressive one, ``theta = 0.5 atan2(2 s_xy, s_xx - s_yy)`` (Mohr's circle; tension positive);
 * :func:`force_segments`: a force chain as segments between the centroids of the two
   triangles a force acts between, with its magnitude [N/m];
+* :func:`floor_cracking`: broken crack elements below the toe's elevation, in the floor in
+  front of the toe and under the slope, by depth below the toe;
 * :func:`normality`: Shapiro-Wilk and Anderson-Darling tests of normality of the magnitudes
   (shape), and a two-sample-free Kolmogorov-Smirnov test against a given normal law (shape and
   place), e.g. the paper's N(-3.07, 0.495) (Shapiro & Wilk 1965; Anderson & Darling 1954;
@@ -29,7 +31,7 @@ import numpy as np
 from fdem.results.analysis import fragments
 
 __all__ = ["initiation_order", "fragments_at", "assemblies", "assembly_table", "principal_directions",
-           "direction_share", "force_segments", "normality", "MesoSnapshot", "MesoRecorder"]
+           "direction_share", "force_segments", "floor_cracking", "normality", "MesoSnapshot", "MesoRecorder"]
 
 
 def initiation_order(time, x, y, n: int | None = None) -> dict:
@@ -115,6 +117,38 @@ def force_segments(centroids, pairs, magnitude) -> tuple[np.ndarray, np.ndarray]
         raise ValueError(f"pairs name triangles outside 0..{c.shape[0] - 1}")
     keep = m > 0
     return np.hstack([c[p[keep, 0]], c[p[keep, 1]]]), m[keep]
+
+
+def floor_cracking(midpoints, broken, toe, toward: float = -1.0, bands=(1.0, 2.0, 4.0, 8.0)) -> dict:
+    """Broken crack elements below the toe's elevation: how many and how deep.
+
+    ``midpoints`` (n, 2) reference midpoints of the crack elements [m], ``broken`` (n,) bool,
+    ``toe`` ``(x, y)`` of the slope toe [m], ``toward`` -1 when the slope faces -x. An element
+    lies below the toe when its midpoint is below the toe's elevation, at depth
+    ``d = y_toe - y`` [m]; it is in the floor when it also lies in front of the toe
+    (``toward (x - x_toe) > 0``), else under the slope. Returns ``broken``, ``below_toe``,
+    ``in_floor``, ``under_slope`` (counts), ``deepest_m`` (largest ``d``, 0 when none) and
+    ``by_depth_m``: the broken elements below the toe with ``d`` in each band
+    ``(0, b_0], (b_0, b_1], ..., (b_last, inf)``, keyed by the band's text.
+    """
+    mid = np.asarray(midpoints, dtype=float)
+    brk = np.asarray(broken, dtype=bool)
+    if mid.ndim != 2 or mid.shape[1] != 2 or brk.shape != (mid.shape[0],):
+        raise ValueError(f"midpoints must be (n, 2) and broken (n,), got {mid.shape} and {brk.shape}")
+    edges = np.asarray(bands, dtype=float)
+    if edges.ndim != 1 or np.any(edges <= 0) or np.any(np.diff(edges) <= 0):
+        raise ValueError(f"depth bands must be increasing positive depths [m], got {bands!r}")
+    depth = float(toe[1]) - mid[brk, 1]
+    front = toward * (mid[brk, 0] - float(toe[0])) > 0
+    below = depth > 0
+    d = depth[below]
+    lows = np.concatenate([[0.0], edges])
+    highs = np.concatenate([edges, [np.inf]])
+    by_depth = {(f"{lo:g}-{hi:g}" if math.isfinite(hi) else f">{lo:g}"): int(np.sum((d > lo) & (d <= hi)))
+                for lo, hi in zip(lows, highs)}
+    return {"broken": int(brk.sum()), "below_toe": int(below.sum()), "in_floor": int(np.sum(below & front)),
+            "under_slope": int(np.sum(below & ~front)), "deepest_m": float(d.max()) if d.size else 0.0,
+            "by_depth_m": by_depth}
 
 
 def normality(magnitudes, mean: float | None = None, std: float | None = None) -> dict:

@@ -139,3 +139,17 @@ def test_muliashi_fixed_wall_is_no_fragment():
     every = fragment_statistics(topo, np.ones(topo.n_cracks, bool), exclude=wall)
     assert every["n_fragments"] == every["n_single_triangles"] == int((~wall).sum())
     sim.close()
+
+
+def test_floor_cracking_counts_broken_elements_below_the_toe_by_place_and_depth():
+    # toe at (10, 7.5), the slope facing -x: the floor is x < 10 below y = 7.5
+    mid = np.array([[5.0, 7.0], [5.0, 4.0], [15.0, 1.0], [15.0, 9.0], [5.0, 2.0], [12.0, 7.4]])
+    broken = np.array([True, True, True, True, False, True])
+    r = meso.floor_cracking(mid, broken, (10.0, 7.5))
+    assert (r["broken"], r["below_toe"], r["in_floor"], r["under_slope"]) == (5, 4, 2, 2)
+    assert r["deepest_m"] == pytest.approx(6.5)  # the element at y = 1 under the slope
+    assert r["by_depth_m"] == {"0-1": 2, "1-2": 0, "2-4": 1, "4-8": 1, ">8": 0}
+    none = meso.floor_cracking(mid, np.zeros(6, bool), (10.0, 7.5))
+    assert none["below_toe"] == 0 and none["deepest_m"] == 0.0
+    with pytest.raises(ValueError, match="midpoints must be"):
+        meso.floor_cracking(mid, broken[:3], (10.0, 7.5))
