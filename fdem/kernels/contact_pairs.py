@@ -97,6 +97,8 @@ Units: coordinates [m], penalty [Pa], forces [N/m], energies [J/m] (plane, per u
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -615,7 +617,8 @@ def tangential_law(ft, du, kt, cap):
     f_trial = ft - kt * du
     if abs(f_trial) <= cap:
         return f_trial, 0.0
-    return np.sign(f_trial) * cap, cap * (abs(f_trial) - cap) / kt
+    # f/|f| is exactly +-1 (and keeps a NaN): the sign without np.sign, which CUDA lacks
+    return cap * (f_trial / abs(f_trial)), cap * (abs(f_trial) - cap) / kt
 
 
 # ----------------------------------------------------------------------------- pair loop
@@ -680,7 +683,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
         c_en += e
         fx = w[0] + w[2] + w[4]
         fy = w[1] + w[3] + w[5]
-        fn = np.sqrt(fx * fx + fy * fy)
+        fn = math.sqrt(fx * fx + fy * fy)
         gfx = 0.0
         gfy = 0.0
         a0 = 0.0
@@ -730,7 +733,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
                 ty = nx
                 sx = spring[q, 0]
                 sy = spring[q, 1]
-                smag = np.sqrt(sx * sx + sy * sy)
+                smag = math.sqrt(sx * sx + sy * sy)
                 ft = smag if sx * tx + sy * ty >= 0.0 else -smag  # rotate into the new tangent
                 kt = kt_pair[q]
                 # Work of the tangential force on the pair, leapfrog-consistent like the ledger:
@@ -754,7 +757,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
                 # leapfrog-consistent dissipation: the work of a force applied at step n is
                 # F_n . (v_{n-1/2} + v_{n+1/2}) dt / 2; the second half of last step's is booked now
                 c_wd -= 0.5 * (spring[q, 2] * wpx + spring[q, 3] * wpy) * dt
-                fd = max(-damp[q] * np.sqrt(k_sec) * vn, -fn)  # never pull beyond the elastic push
+                fd = max(-damp[q] * math.sqrt(k_sec) * vn, -fn)  # never pull beyond the elastic push
                 c_wd -= 0.5 * fd * vn * dt
                 spring[q, 2] = fd * nx
                 spring[q, 3] = fd * ny

@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit, prange
 from fdem.kernels.contact_pairs import PARALLEL_MIN_PAIRS, _corners, _max3
 
-__all__ = ["triangle_boxes", "brute_force_pairs", "grid_pairs", "fan_pairs", "max_displacement"]
+__all__ = ["triangle_boxes", "brute_force_pairs", "grid_pairs", "fan_pairs", "triangle_moved2", "max_displacement"]
 
 
 # ----------------------------------------------------------------------------- broad phase
@@ -284,15 +284,23 @@ def fan_pairs(ptr, tri, vertices, bond):
     return pi, pj
 
 
+@njit(cache=True, inline="always")
+def triangle_moved2(x, x_ref, t):
+    """Largest squared displacement ``|x - x_ref|^2`` [m^2] of the three nodes of exploded
+    triangle ``t`` (the contact search's trigger, on the CPU and the GPU)."""
+    m = 0.0
+    for k in range(3):
+        dx = x[3 * t + k, 0] - x_ref[3 * t + k, 0]
+        dy = x[3 * t + k, 1] - x_ref[3 * t + k, 1]
+        m = max(m, dx * dx + dy * dy)
+    return m
+
+
 @njit(cache=True, error_model="numpy")
 def max_displacement(x, x_ref, active):
     """Largest ``|x - x_ref|`` over the nodes of the active triangles [m] (serial: memory-bound,
     one pass, cheaper than waking threads)."""
     m = 0.0
     for a in range(active.shape[0]):
-        t = active[a]
-        for k in range(3):
-            dx = x[3 * t + k, 0] - x_ref[3 * t + k, 0]
-            dy = x[3 * t + k, 1] - x_ref[3 * t + k, 1]
-            m = max(m, dx * dx + dy * dy)
+        m = max(m, triangle_moved2(x, x_ref, active[a]))
     return np.sqrt(m)

@@ -33,7 +33,7 @@ from fdem.kernels.triangles import (FASTMATH, TC_B00, TC_B01, TC_B10, TC_B11, TC
 
 __all__ = ["StepSums", "LEDGER_FIELDS", "damped_velocity", "constrain_and_move", "advance_node", "BLOCK", "block_span",
            "n_blocks",
-           "step_exploded", "advance_node_elastic", "step_exploded_elastic", "triangle_pass", "viscous_power",
+           "triangle_step", "step_exploded", "advance_node_elastic", "step_exploded_elastic", "triangle_pass", "viscous_power",
            "node_pass"]
 
 
@@ -202,27 +202,83 @@ def n_blocks(n: int) -> int:
     return max(1, -(-n // BLOCK))
 
 
+@njit(fastmath=FASTMATH, cache=True, inline="always")
+def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha,
+                  c_keep, c_div, local, damped, use_viscous, ledger):
+    """One triangle of an exploded mesh: its forces at ``x_n`` and the central-difference update
+    of its own three nodes ``3t, 3t + 1, 3t + 2`` (:func:`advance_node`).
+
+    The body of every fused step loop, the CPU's (:func:`step_exploded`) and the GPU's
+    (:mod:`fdem.kernels.cuda_step`): one source for the step. ``inertia`` (n_nodes, 2) holds
+    the inertial masses and their inverses of a density-scaled stage, or is ``None`` (the
+    triangle's lumped mass; gravity always acts on that). ``c_keep = 1 - alpha dt/2`` and
+    ``c_div = 1 / (1 + alpha dt/2)``. Returns this triangle's share of the sums named in
+    :data:`LEDGER_FIELDS`, in that order (``n_inverted`` 0 or 1; the state energies are 0
+    unless ``ledger``).
+    """
+    h = 0.5 * dt
+    i = 3 * t
+    r = triangle_response(tc, t, x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1], x[i + 2, 0], x[i + 2, 1],
+                          v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1], use_viscous)
+    m = tc[t, TC_MASS]
+    kin = 0.0
+    gmom = 0.0
+    emom = 0.0
+    d_e = 0.0
+    d_l = 0.0
+    r_e = 0.0
+    r_l = 0.0
+    i_e = 0.0
+    i_l = 0.0
+    for k in range(3):  # one inlined call site keeps the compile time down
+        mi = m if inertia is None else inertia[i + k, 0]
+        im = tc[t, TC_INV_MASS] if inertia is None else inertia[i + k, 1]
+        a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
+                         local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
+        kin += a[2]
+        if ledger:
+            gmom += a[3]
+            emom += a[4]
+        if damped:
+            d_e += a[5]
+            d_l += a[6]
+        r_e += a[7]
+        r_l += a[8]
+        if use_int:
+            i_e += a[9]
+            i_l += a[10]
+    v_e = 0.0
+    v_l = 0.0
+    if use_viscous:
+        v_e = h * r[12]
+        v_l = h * velocity_gradient_power(tc, t, r[8], r[9], r[10], r[11], v[i, 0], v[i, 1],
+                                          v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1])
+    strain = r[6] if ledger else 0.0
+    bad = 0 if r[7] > 0.0 else 1
+    return strain, kin, gmom, emom, d_e, d_l, v_e, v_l, r_e, r_l, i_e, i_l, bad
+
+
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
 def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
                   gx, gy, dt, alpha, local, use_viscous, ledger, partial, inertia, ranges=None):
     """One fused step on an exploded mesh (node ``3t + k`` is corner ``k`` of triangle ``t``).
 
-    Each triangle computes its forces and advances its own three nodes: race-free, one pass
-    over memory. ``alpha`` [1/s] and ``local`` [-] are the damping coefficients (both 0: no
-    damping code runs); ``ledger`` asks for the state energies (strain, kinetic, moments),
-    which cost a little and are only needed on output steps. ``partial`` is a work array of
-    shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia`` (n_nodes, 2) gives the nodes'
-    inertial masses and their inverses of a density-scaled stage, or ``None`` (the triangles' own lumped masses;
-    gravity always acts on those). ``ranges`` (n_items, 2) int64 lists the triangles to step as
-    half-open ranges ``[start, end)``, one work item each (``partial`` then has ``n_items`` rows),
-    or ``None``: every triangle, in blocks of :data:`BLOCK` (the triangles left out are asleep,
-    :mod:`fdem.solve.sleeping`). Returns the sums named in :data:`LEDGER_FIELDS` (state
-    energies 0 unless ``ledger``; sums over the stepped triangles only).
+    Each triangle computes its forces and advances its own three nodes (:func:`triangle_step`):
+    race-free, one pass over memory. ``alpha`` [1/s] and ``local`` [-] are the damping
+    coefficients (both 0: no damping code runs); ``ledger`` asks for the state energies
+    (strain, kinetic, moments), which cost a little and are only needed on output steps.
+    ``partial`` is a work array of shape ``(n_blocks(n_tri), len(LEDGER_FIELDS))``. ``inertia``
+    (n_nodes, 2) gives the nodes' inertial masses and their inverses of a density-scaled stage,
+    or ``None`` (the triangles' own lumped masses; gravity always acts on those). ``ranges``
+    (n_items, 2) int64 lists the triangles to step as half-open ranges ``[start, end)``, one
+    work item each (``partial`` then has ``n_items`` rows), or ``None``: every triangle, in
+    blocks of :data:`BLOCK` (the triangles left out are asleep, :mod:`fdem.solve.sleeping`).
+    Returns the sums named in :data:`LEDGER_FIELDS` (state energies 0 unless ``ledger``; sums
+    over the stepped triangles only).
     """
     c_keep = 1.0 - 0.5 * alpha * dt
     c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
     damped = alpha != 0.0 or local != 0.0
-    h = 0.5 * dt
     n_tri = tc.shape[0]
     nb = partial.shape[0]
     for blk in prange(nb):
@@ -241,35 +297,21 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
         n_bad = 0
         t_lo, t_hi = block_span(blk, n_tri, ranges)
         for t in range(t_lo, t_hi):
-            i = 3 * t
-            r = triangle_response(tc, t, x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1], x[i + 2, 0], x[i + 2, 1],
-                                  v[i, 0], v[i, 1], v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1],
-                                  use_viscous)
-            m = tc[t, TC_MASS]
-            for k in range(3):  # one inlined call site keeps the compile time down
-                mi = m if inertia is None else inertia[i + k, 0]
-                im = tc[t, TC_INV_MASS] if inertia is None else inertia[i + k, 1]
-                a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
-                                 local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
-                kin += a[2]
-                if ledger:
-                    gmom += a[3]
-                    emom += a[4]
-                if damped:
-                    d_e += a[5]
-                    d_l += a[6]
-                r_e += a[7]
-                r_l += a[8]
-                if use_int:
-                    i_e += a[9]
-                    i_l += a[10]
-            n_bad += 0 if r[7] > 0.0 else 1
-            if use_viscous:
-                v_e += h * r[12]
-                v_l += h * velocity_gradient_power(tc, t, r[8], r[9], r[10], r[11], v[i, 0], v[i, 1],
-                                                   v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1])
-            if ledger:
-                strain += r[6]
+            s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy,
+                              dt, alpha, c_keep, c_div, local, damped, use_viscous, ledger)
+            strain += s[0]
+            kin += s[1]
+            gmom += s[2]
+            emom += s[3]
+            d_e += s[4]
+            d_l += s[5]
+            v_e += s[6]
+            v_l += s[7]
+            r_e += s[8]
+            r_l += s[9]
+            i_e += s[10]
+            i_l += s[11]
+            n_bad += s[12]
         partial[blk, 0] = strain
         partial[blk, 1] = kin
         partial[blk, 2] = gmom

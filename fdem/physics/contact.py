@@ -81,7 +81,7 @@ factor ``F`` (the crack set's :class:`~fdem.interfaces.Interfaces`, or
 """
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Callable, Iterable
 import numpy as np
 from fdem.physics.interfaces import Interfaces
 from fdem.kernels import contact_pairs as kc
@@ -350,6 +350,9 @@ class ContactSet:
         self._x_search = None
         self._needs_search = True
         self.n_searches = 0
+        # the GPU's copy of the pair arrays while a simulation runs on one
+        # (fdem.solve.cuda_backend); None on the CPU
+        self.device = None
 
         # energy ledger [J/m]
         self._e_normal = 0.0
@@ -604,11 +607,18 @@ class ContactSet:
         self._needs_search = False
         self.n_searches += 1
 
-    def _maybe_search(self, x: np.ndarray) -> None:
+    def search_due(self, moved: Callable[[], float]) -> bool:
+        """Whether the pair list must be searched again: asked for (new contactors, loose
+        vertices), never searched, or ``moved()`` (the largest displacement of an active node
+        since the last search [m], asked for only when needed) above half the skin. Fan pairs do
+        not depend on positions: they are never re-searched for motion."""
         if self._needs_search or self._x_search is None:
+            return True
+        return self.full_search and moved() > 0.5 * self.skin
+
+    def _maybe_search(self, x: np.ndarray) -> None:
+        if self.search_due(lambda: ks.max_displacement(x, self._x_search, self._active)):
             self.search(x)
-        elif self.full_search and ks.max_displacement(x, self._x_search, self._active) > 0.5 * self.skin:
-            self.search(x)   # (fan pairs do not depend on positions: nothing to re-search)
 
     # ------------------------------------------------------------------ the solver's interface
     def add_forces(self, x: np.ndarray, v: np.ndarray, f: np.ndarray, dt: float, step: int) -> None:
@@ -627,21 +637,33 @@ class ContactSet:
                 self._watch_inelastic(x)
         if self.dormant:
             return
+        if self.device is not None:  # the same pair law on the GPU (fdem.solve.cuda_backend)
+            if self.search_due(self.device.contact_moved):
+                self.device.pull_contact(self)  # the pairs' friction history, carried by the search
+                self.search(self.device.host_x())
+            if len(self.pairs) == 0:
+                self.book_pair_sums(0.0, 0.0, 0.0, 0.0)
+            else:
+                self.device.contact_forces(self, float(dt))  # books its sums when the step's come back
+            return
         if v is None:  # no velocities: no slip or damping increments this step
             v = np.zeros_like(x)
         self._maybe_search(x)
         if len(self.pairs) == 0:
-            self._e_normal = 0.0
-            self._e_tangential = 0.0
+            self.book_pair_sums(0.0, 0.0, 0.0, 0.0)
             return
-        e_n, e_t, w_f, w_d = kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
+        self.book_pair_sums(*kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
                                             self._mu_pair, self._kt_pair, self._damp_pair, float(dt),
-                                            self._history, self._f_target, self._touching, self._witness, f)
+                                            self._history, self._f_target, self._touching, self._witness, f))
         kc.gather_forces(f, self._active, self._inc_ptr, self._inc_pair, self._f_target, self._touching)
-        self._e_normal = e_n
-        self._e_tangential = e_t
-        self._w_tangential += w_f
-        self._w_damping += w_d
+
+    def book_pair_sums(self, e_normal: float, e_tangential: float, w_friction: float, w_damping: float) -> None:
+        """Book one step's pair sums (:func:`fdem.kernels.contact_pairs.pair_forces`): the normal
+        and tangential energies now, the friction and damping work of the step [J/m]."""
+        self._e_normal = e_normal
+        self._e_tangential = e_tangential
+        self._w_tangential += w_friction
+        self._w_damping += w_damping
 
     def pair_forces(self) -> dict[str, np.ndarray]:
         """Forces of the touching pairs at the last :meth:`add_forces`, for output (force chains).

@@ -275,6 +275,9 @@ class CrackSet:
             self._node_map[nf, rank] = cf
         self._awake: np.ndarray | None = None  # (n,) bool, internal order: elements evaluated; None: all
         self._carry_broken = np.zeros(0, dtype=np.int64)  # broken outside add_forces, handed on by the next call
+        # the GPU's copy of the element arrays while a simulation runs on one
+        # (fdem.solve.cuda_backend); None on the CPU
+        self.device = None
         self._set_active(np.arange(n, dtype=np.int64))
 
     # ------------------------------------------------------------------ constants
@@ -529,7 +532,11 @@ class CrackSet:
         if self._run.size == 0:
             self.newly_broken = np.zeros(0, dtype=np.int64)
             return
-        if self._run.size < self.parallel_min:
+        if self.device is not None:  # the same law on the GPU; breaks are registered here, on the host
+            nb = self.device.crack_forces(self)
+            if nb:
+                x = self.device.host_x()  # the breaks' positions and released energies need x_n
+        elif self._run.size < self.parallel_min:
             nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
                                        self._offset, self._dil, self._run, self._broke_flag)
         elif self.scheme == "colour":

@@ -64,6 +64,7 @@ from fdem.solve.damping import Damping, NO_DAMPING
 from fdem.solve import density_scaling
 from fdem.solve.sleeping import SleepPolicy, Sleeping
 from fdem.solve.ledger import EnergyLedger, work_halves
+from fdem.solve.cuda_backend import BackendError, CudaBackend, check_backend
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation", "StopRequest",
            "STOP", "MONITOR_QUANTITIES", "PointMonitor"]
@@ -219,18 +220,26 @@ class Simulation:
         Regions at rest stop being stepped until a force reaches them or the load changes
         (:mod:`fdem.solve.sleeping`); ``True`` takes the default policy. Default off. Needs an
         exploded mesh and gravity. :attr:`sleeping` holds the state (``None`` when off).
+    backend : ``"cpu"`` (default) or ``"cuda"``
+        Where the steps run: Numba's CPU loops, or an NVIDIA GPU through numba-cuda
+        (:mod:`fdem.solve.cuda_backend`: the same laws, the state on the device during each
+        :meth:`run`). ``"cuda"`` without a GPU raises :class:`~fdem.solve.cuda_backend.BackendError`
+        here, before any work.
     """
 
     def __init__(self, model: Model, dt: float | None = None, dt_fraction: float = 0.8, out_dir=None,
                  name: str = "fdem", progress: bool = True, pictures: bool = False, providers=(),
                  output_fields=None, compression: str | None = "zlib", time_cap: float | None = None,
                  density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET,
-                 sleeping: bool | SleepPolicy | None = None, output_precision: str = "float32"):
+                 sleeping: bool | SleepPolicy | None = None, output_precision: str = "float32",
+                 backend: str = "cpu"):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         if density_scaling is not None and not (math.isfinite(density_scaling) and 0.0 <= density_scaling <= 1.0):
             raise ValueError(f"density_scaling (added-mass budget, a fraction of the model's mass) must lie in "
                              f"[0, 1] or be None, got {density_scaling!r}")
+        self.backend = check_backend(backend)  # before any work: no GPU, no run
+        self._device: CudaBackend | None = None
         self.density_scaling = density_scaling or None
         self.inertia: np.ndarray | None = None  # inertial node masses while density-scaled, else None
         self._inertia_kernel: np.ndarray | None = None  # (n_nodes, 2): inertia and its inverse, for the kernels
@@ -303,6 +312,8 @@ class Simulation:
         self.add_monitor("max_speed", lambda s: float(np.sqrt((s.state.v ** 2).sum(1)).max()))
         self.add_monitor("max_displacement", lambda s: float(np.sqrt(((s.state.x - s.x0) ** 2).sum(1)).max()))
         self.sleeping: Sleeping | None = None
+        if self.backend == "cuda":
+            self._device = CudaBackend(self)
         self.set_sleeping(sleeping)
 
     # ------------------------------------------------------------------ setup
@@ -456,6 +467,8 @@ class Simulation:
         if self.sleeping is not None:
             self.sleeping.wake_all(self)
             self.sleeping = None
+        if sleeping and self._device is not None:
+            raise BackendError("sleeping regions run on the CPU only; drop sleeping or use backend 'cpu'")
         if sleeping:
             self.sleeping = Sleeping(self, sleeping if isinstance(sleeping, SleepPolicy) else SleepPolicy())
             self.add_monitor("asleep_fraction", lambda s: s.sleeping.fraction_asleep if s.sleeping else 0.0)
@@ -480,6 +493,8 @@ class Simulation:
         before the step, monitors after it) in :attr:`history` and ``history.csv``.
         """
         st = self.state
+        if self._device is not None:
+            return self._device_step(damping, ledger)
         x, v, dt = st.x, st.v, self.dt
         use_int = bool(self.providers)
         sl = self.sleeping
@@ -547,18 +562,43 @@ class Simulation:
                             damping_early=d_e, damping_late=d_l, viscous_early=v_e, viscous_late=v_l,
                             reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
                             n_inverted=n_bad)
+        self._book_step(sums, ledger)
+        if sl is not None:  # after the books of this step: what sleeping removes counts from the next
+            sl.after_step(self, st.step % sl.check_steps(dt) == 0)
+        return sums
+
+    def _book_step(self, sums: StepSums, ledger: bool) -> None:
+        """Advance the clock and book a step's sums (a history row when ``ledger``)."""
+        st = self.state
         step_before, time_before = st.step, st.time
         if self.exploded or ledger:  # the exploded kernels sum the kinetic energy every step
             self.kinetic_peak = max(self.kinetic_peak, float(sums.kinetic))
         st.step += 1
-        st.time += dt
+        st.time += self.dt
         if ledger:
             self.last_row = self._record(sums, step_before, time_before)
         else:
             self.ledger.add_step(*work_halves(sums))
-        if sl is not None:  # after the books of this step: what sleeping removes counts from the next
-            sl.after_step(self, st.step % sl.check_steps(dt) == 0)
+
+    def _device_step(self, damping: Damping, ledger: bool) -> StepSums:
+        """:meth:`step` on the GPU backend; a step outside :meth:`run` brings its state back."""
+        dev = self._device
+        alone = not dev.attached
+        if alone:
+            dev.attach()
+        try:
+            sums = dev.step(damping, ledger)
+            self._book_step(sums, ledger)
+        finally:
+            if alone:
+                dev.detach()
         return sums
+
+    def sync_host(self, state_only: bool = False) -> None:
+        """Bring the GPU's state to the host arrays during a run (no-op on the CPU):
+        positions and velocities, and unless ``state_only`` the providers' arrays too."""
+        if self._device is not None:
+            self._device.pull(state_only)
 
     # ------------------------------------------------------------------ running
     def run(self, n_steps: int | None = None, t_end: float | None = None, damping: Damping | None = None,
@@ -618,6 +658,8 @@ class Simulation:
             bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)
         bar_chunk = 0
         STOP.running += 1
+        if self._device is not None:
+            self._device.attach()
         try:
             for k in range(phase, phase + n_steps):
                 is_ledger = (k % history_every == 0) or k == phase + n_steps - 1
@@ -634,6 +676,7 @@ class Simulation:
                     if stop_when is not None and stop_when(self):
                         break
                 if (k + 1) % checkpoint_every == 0:
+                    self.sync_host(state_only=True)
                     self._good = self.state.copy()
                 if (k + 1) % output_every == 0 and k + 1 < phase + n_steps:
                     self.write_output()
@@ -652,6 +695,8 @@ class Simulation:
             raise
         finally:
             STOP.running -= 1
+            if self._device is not None:
+                self._device.detach()
             if bar is not None:
                 bar.update(bar_chunk)
                 bar.close()
@@ -697,6 +742,7 @@ class Simulation:
             self._fail(step, time, "non-finite energy (NaN or infinity in the state)", None)
 
     def _fail(self, step: int, time: float, reason: str, triangle: int | None) -> None:
+        self.sync_host()  # the GPU backend's state, mid-run
         x = self.state.x
         stress = np.empty((self.model.n_triangles, 6))
         with np.errstate(all="ignore"):
@@ -759,6 +805,7 @@ class Simulation:
     def _write_interrupted(self) -> Path | None:
         """``interrupted_state.npz``: a full checkpoint of the state the run stopped in (loadable
         with :func:`fdem.solve.checkpoint.load_checkpoint`), and its ``.vtu`` to look at."""
+        self.sync_host()  # the GPU backend's state, mid-run
         if self.out_dir is None:
             return None
         from fdem.solve.checkpoint import save_checkpoint
@@ -916,6 +963,7 @@ class Simulation:
     def write_output(self) -> None:
         """Write one output frame of the current state: triangles VTU, crack VTU (with crack
         elements), contact VTU (with a contact set), optional PNG (``docs/outputs.md``)."""
+        self.sync_host()  # the GPU backend's state, mid-run
         if self.out_dir is None:
             self._frames += 1
             return
@@ -988,6 +1036,7 @@ class Simulation:
         ledger step, the last history row, the time step, the last good state (written on
         failure) and each provider's ``state_dict()`` in registration order. A provider
         without ``state_dict`` is an error naming it."""
+        self.sync_host()  # the GPU backend's state, mid-run
         missing = [f"{i}: {type(p).__name__}" for i, p in enumerate(self.providers)
                    if not callable(getattr(p, "state_dict", None))]
         if missing:

@@ -1,0 +1,381 @@
+"""The ``cuda`` backend: a simulation's state on an NVIDIA GPU between host round trips.
+
+``Simulation(model, ..., backend="cuda")`` (or ``fdem run CASE --backend cuda``) steps with the
+GPU loops of :mod:`fdem.kernels.cuda_step`, which call the CPU's own scalar laws: the triangle
+step, the crack element law and the contact pair law are each written once.
+
+What stays on the device, and what comes back
+---------------------------------------------
+:meth:`CudaBackend.attach` (at the start of every :meth:`~fdem.solve.simulation.Simulation.run`)
+copies the state to the device: positions, velocities, masses, supports, the crack elements'
+arrays and the contact pairs with their friction history. Each step then runs on the device:
+
+1. zero the interaction forces; the crack kernel; the contact search's displacement trigger;
+2. **round trip 1** (3 numbers): how many elements broke or left the elastic range, how far the
+   contactors moved. Breaks are rare; when one happens the host reads the element arrays,
+   registers the break (events, the active list, contact faces: the CPU's own code in
+   :class:`~fdem.physics.cracks.CrackSet` and :class:`~fdem.physics.contact.ContactSet`) and
+   sends back what changed. A due contact search likewise runs on the host
+   (:meth:`ContactSet.search`) with the pairs' history read back first;
+3. the contact pair and gather kernels; the fused triangle step;
+4. **round trip 2** (17 numbers): the ledger's sums and the contact energies.
+
+Positions and velocities come back on history rows (the ledger's state energies, monitors,
+stop rules), for the in-memory good state, output frames and checkpoints
+(:meth:`CudaBackend.pull`), and :meth:`CudaBackend.detach` brings everything back at the end
+of each run, so that the workflow between stages, checkpoints and restarts work on host arrays
+exactly as on the CPU: a checkpoint written by one backend resumes on the other. Anything that
+changes the state between runs (a new strength, a switch of density scaling, zeroed
+velocities) is on the device at the next attach.
+
+Round trips, not launches, bound the speed of small models: two synchronising copies and six
+launches per step (see ``docs/benchmarks.md`` for what was measured on a device).
+
+Force providers other than the crack and contact sets (boundaries, shaking) run on the host:
+the positions and velocities come back every step for them and their forces go out, which is
+correct and slow. Sleeping regions and conforming (not exploded) meshes are CPU-only and
+refused at construction.
+
+Availability: :func:`require_cuda` raises :class:`BackendError` at once when numba-cuda is
+missing or finds no GPU (under ``NUMBA_ENABLE_CUDASIM=1`` the simulator counts as one).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fdem.kernels.stepping import StepSums
+from fdem.kernels.triangles import TC_MASS
+
+__all__ = ["BACKENDS", "BackendError", "require_cuda", "check_backend", "HostPositions", "CudaBackend"]
+
+BACKENDS = ("cpu", "cuda")
+"""The names :class:`~fdem.solve.simulation.Simulation` takes as ``backend``."""
+
+_SCALARS = 20  # one device buffer: step sums 0:13, contact sums 13:17, crack counts 17:19, moved 19
+_STEP, _CONTACT, _COUNTS, _MOVED = slice(0, 13), slice(13, 17), slice(17, 19), 19
+
+
+class BackendError(RuntimeError):
+    """The backend asked for cannot run here (no GPU, numba-cuda missing, a CPU-only feature)."""
+
+
+def require_cuda():
+    """The ``numba.cuda`` module, or :class:`BackendError` saying what is missing.
+
+    Checked before any work: a run that asks for the GPU on a machine without one stops at once."""
+    try:
+        from numba import cuda
+    except ImportError as exc:  # numba without the CUDA target
+        raise BackendError("backend 'cuda' needs the numba-cuda package: pip install numba-cuda "
+                           f"(import failed: {exc})") from None
+    try:
+        available = cuda.is_available()
+    except Exception as exc:  # a broken driver install raises instead of answering
+        raise BackendError(f"backend 'cuda': the CUDA driver did not answer ({exc})") from None
+    if not available:
+        raise BackendError("backend 'cuda' needs an NVIDIA GPU and its driver, and none was found "
+                           "(numba.cuda.is_available() is False); run with backend 'cpu'")
+    return cuda
+
+
+def check_backend(name: str) -> str:
+    """``name`` if it is a known backend and can run here, else :class:`BackendError` /
+    ``ValueError`` naming the choices."""
+    if name not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+    if name == "cuda":
+        require_cuda()
+    return name
+
+
+class HostPositions:
+    """The positions ``x_n`` of the current step, read back from the device on first use.
+
+    Handed to the host code of a provider (``ContactSet._watch_inelastic`` indexes it) so that
+    the copy is made only when that code needs it."""
+
+    def __init__(self, backend: "CudaBackend"):
+        self._backend = backend
+
+    def __getitem__(self, key):
+        return self._backend.host_x()[key]
+
+    def __array__(self, dtype=None, copy=None):
+        x = self._backend.host_x()
+        return x if dtype is None else x.astype(dtype)
+
+
+class CudaBackend:
+    """Device copies of a :class:`~fdem.solve.simulation.Simulation`'s arrays and its GPU step.
+
+    Made by the simulation for ``backend="cuda"``; the simulation calls :meth:`attach`,
+    :meth:`step`, :meth:`pull` and :meth:`detach`. The crack and contact sets call back
+    :meth:`crack_forces`, :meth:`contact_moved`, :meth:`contact_forces`, :meth:`pull_contact`
+    and :meth:`host_x` (their ``device`` attribute is this object while attached).
+    """
+
+    def __init__(self, sim):
+        self.cuda = require_cuda()
+        from fdem.kernels import cuda_step  # compiles nothing yet: kernels compile at first launch
+
+        self.k = cuda_step
+        if not sim.exploded:
+            raise BackendError("backend 'cuda' steps exploded meshes only (every triangle owns its three "
+                               "nodes, as the crack elements need); this model's mesh is conforming")
+        self.sim = sim
+        self.attached = False
+        self._x_fresh = False  # the host's x equals the device's x_n of this step
+        self._pending_contact = False  # contact sums of this step still on the device
+        self._moved_read = False  # the contact trigger of this step has come back
+        self._after_breaks = False  # the host cleared break flags that the device must get
+        self.round_trips = 0  # synchronising copies so far (for the benchmarks)
+
+    # ------------------------------------------------------------------ transfers
+    def _to(self, a):
+        return self.cuda.to_device(np.ascontiguousarray(a))
+
+    def attach(self) -> None:
+        """Copy the whole state to the device (the start of a run)."""
+        sim, cuda = self.sim, self.cuda
+        st = sim.state
+        self.x = self._to(st.x)
+        self.v = self._to(st.v)
+        self.tc = self._to(sim.tc)
+        inertia = sim._inertia_kernel
+        if inertia is None:  # the lumped masses: one kernel signature for every stage
+            m = np.repeat(sim.tc[:, TC_MASS], 3)
+            inertia = np.column_stack([m, 1.0 / m])
+        self.inertia = self._to(inertia)
+        self.flags = self._to(sim.flags)
+        self.v_prescribed = self._to(sim.v_prescribed)
+        self.f_ext = self._to(sim.f_external if sim.use_external else np.zeros((1, 2)))
+        self.f = cuda.device_array((sim.model.n_nodes, 2), np.float64)
+        self.scalars = cuda.device_array(_SCALARS, np.float64)
+        self._zero_scalars = np.zeros(_SCALARS)
+        self.host_scalars = np.zeros(_SCALARS)
+        self.host_providers = [p for p in sim.providers if p is not sim.cracks and p is not sim.contact]
+        if sim.cracks is not None:
+            self._push_cracks(sim.cracks)
+            sim.cracks.device = self
+        if sim.contact is not None:
+            self._pair_key = None
+            self._push_contact(sim.contact)
+            sim.contact.device = self
+        self.attached = True
+
+    def pull(self, state_only: bool = False) -> None:
+        """Copy positions and velocities back to the host; unless ``state_only``, also the
+        interaction forces of the last step and the providers' mutable arrays."""
+        if not self.attached:
+            return
+        st = self.sim.state
+        self.x.copy_to_host(st.x)
+        self.v.copy_to_host(st.v)
+        self._x_fresh = True
+        self.round_trips += 1
+        if state_only:
+            return
+        if self.sim.providers:
+            self.f.copy_to_host(self.sim.f_interaction)
+        if self.sim.cracks is not None:
+            self._pull_cracks(self.sim.cracks)
+        if self.sim.contact is not None:
+            self.pull_contact(self.sim.contact)
+
+    def detach(self) -> None:
+        """Bring everything back (the end of a run); the providers compute on the host again."""
+        if not self.attached:
+            return
+        self.pull()
+        for p in (self.sim.cracks, self.sim.contact):
+            if p is not None:
+                p.device = None
+        self.attached = False
+
+    def host_x(self) -> np.ndarray:
+        """The host's position array, made equal to the device's ``x_n`` (one copy per step at most)."""
+        if not self._x_fresh:
+            self.x.copy_to_host(self.sim.state.x)
+            self._x_fresh = True
+            self.round_trips += 1
+        return self.sim.state.x
+
+    # ------------------------------------------------------------------ crack elements
+    def _push_cracks(self, cs) -> None:
+        self.c_nodes = self._to(cs._nodes)
+        self.c_const = self._to(cs._const)
+        self.c_status = self._to(cs._status)
+        self.c_state = self._to(cs._state)
+        self.c_diss = self._to(cs._diss)
+        self.c_offset = self._to(cs._offset)
+        self.c_dil = self._to(cs._dil)
+        self.c_broke = self._to(cs._broke_flag)
+        self._push_run(cs)
+
+    def _push_run(self, cs) -> None:
+        self._run_host = cs._run
+        self.c_run = self._to(cs._run if cs._run.size else np.zeros(1, np.int64))
+        self._n_run = int(cs._run.size)
+
+    def _pull_cracks(self, cs) -> None:
+        self.c_status.copy_to_host(cs._status)
+        self.c_state.copy_to_host(cs._state)
+        self.c_diss.copy_to_host(cs._diss)
+        self.c_broke.copy_to_host(cs._broke_flag)
+
+    def crack_forces(self, cs) -> int:
+        """The crack kernel into the device's force array; returns how many elements broke.
+
+        Launches the contact search's trigger in the same round trip. When elements broke, the
+        host's element arrays are brought up to date for :meth:`CrackSet._register_breaks`,
+        and after it the live list and the cleared flags go back."""
+        k = self.k
+        if cs._run is not self._run_host:
+            self._push_run(cs)
+        if self._n_run:
+            k.crack_kernel[k.blocks_for(self._n_run), k.THREADS](
+                self.x, self.f, self.c_nodes, self.c_const, self.c_status, self.c_state, self.c_diss,
+                self.c_offset, self.c_dil, self.c_run, self.c_broke, self.scalars[_COUNTS])
+        self._launch_moved()
+        self._read_scalars()
+        self._moved_read = True
+        n_broke = int(self.host_scalars[_COUNTS][0])
+        n_left_elastic = int(self.host_scalars[_COUNTS][1])
+        if n_broke:
+            self._pull_cracks(cs)
+            self._after_breaks = True
+        elif n_left_elastic:  # contact watches the inelastic elements through the status
+            self.c_status.copy_to_host(cs._status)
+        return n_broke
+
+    def _sync_after_breaks(self, cs) -> None:
+        if self._after_breaks:
+            self.c_broke.copy_to_device(cs._broke_flag)
+            self._after_breaks = False
+
+    # ------------------------------------------------------------------ contact
+    def _push_contact(self, co) -> None:
+        self._pair_key = co.pairs
+        n_pairs = len(co.pairs)
+        pair_i = co._pair_i if n_pairs else np.zeros(1, np.int64)
+        # one thread per contactor: the pairs of a contactor are contiguous (pair_i sorted)
+        starts = np.flatnonzero(np.diff(co._pair_i)) + 1 if n_pairs else np.zeros(0, np.int64)
+        self.p_starts = self._to(np.concatenate([[0], starts, [n_pairs]]).astype(np.int64))
+        self._n_contactors = len(starts) + 1 if n_pairs else 0
+        self.p_i = self._to(pair_i)
+        self.p_j = self._to(co._pair_j if n_pairs else np.zeros(1, np.int64))
+        one = np.zeros(1)
+        self.p_mu = self._to(co._mu_pair if n_pairs else one)
+        self.p_kt = self._to(co._kt_pair if n_pairs else one)
+        self.p_damp = self._to(co._damp_pair if n_pairs else one)
+        self.p_hist = self._to(co._history if n_pairs else np.zeros((1, co._history.shape[1])))
+        self.p_ft = self._to(co._f_target if n_pairs else np.zeros((1, 6)))
+        self.p_touch = self._to(co._touching if n_pairs else np.zeros(1, np.uint8))
+        self.p_witness = self._to(co._witness if n_pairs else np.zeros(1, np.uint8))
+        self.p_active = self._to(co._active if co._active.size else np.zeros(1, np.int64))
+        self._n_active = int(co._active.size)
+        self.p_inc_ptr = self._to(co._inc_ptr)
+        self.p_inc_pair = self._to(co._inc_pair if co._inc_pair.size else np.zeros(1, np.int64))
+        self.p_x_search = self._to(co._x_search if co._x_search is not None else self.sim.state.x)
+        self._n_pairs = n_pairs
+
+    def pull_contact(self, co) -> None:
+        """The pairs' history (friction springs, touching flags, separating axes) back to the host."""
+        if self._pair_key is co.pairs and self._n_pairs:
+            self.p_hist.copy_to_host(co._history)
+            self.p_touch.copy_to_host(co._touching)
+            self.p_witness.copy_to_host(co._witness)
+            self.p_ft.copy_to_host(co._f_target)
+
+    def _launch_moved(self) -> None:
+        co = self.sim.contact
+        if co is None or co.device is None or self._pair_key is not co.pairs or not self._n_active:
+            return
+        k = self.k
+        k.moved_kernel[k.blocks_for(self._n_active), k.THREADS](self.x, self.p_x_search, self.p_active,
+                                                               self.scalars[_MOVED:_MOVED + 1])
+
+    def contact_moved(self) -> float:
+        """Largest displacement of an active contact node since the last search [m] (this step's
+        trigger, read back with the crack counts)."""
+        if not self._moved_read:  # no crack kernel ran: the trigger has its own round trip
+            self._launch_moved()
+            self._read_scalars()
+            self._moved_read = True
+        return float(np.sqrt(self.host_scalars[_MOVED]))
+
+    def contact_forces(self, co, dt: float) -> None:
+        """The pair and gather kernels into the device's force array (the pairs are sent again
+        when a search has changed them); the sums are booked after the step's round trip."""
+        k = self.k
+        if self._pair_key is not co.pairs:
+            self._push_contact(co)
+        if self._n_contactors:
+            k.contact_kernel[k.blocks_for(self._n_contactors), k.THREADS](
+                self.x, self.v, self.p_i, self.p_j, self.p_starts, co.penalty, self.p_mu, self.p_kt, self.p_damp,
+                dt, self.p_hist, self.p_ft, self.p_touch, self.p_witness, self.f, self.scalars[_CONTACT])
+            k.gather_kernel[k.blocks_for(self._n_active), k.THREADS](
+                self.f, self.p_active, self.p_inc_ptr, self.p_inc_pair, self.p_ft, self.p_touch)
+        self._pending_contact = True
+
+    # ------------------------------------------------------------------ the step
+    def _read_scalars(self) -> None:
+        self.scalars.copy_to_host(self.host_scalars)
+        self.round_trips += 1
+
+    def step(self, damping, ledger: bool) -> StepSums:
+        """One step on the device; the same sums as the CPU step (:class:`StepSums`)."""
+        sim, k = self.sim, self.k
+        st = sim.state
+        dt = sim.dt
+        self._x_fresh = False
+        self._moved_read = False
+        self.scalars.copy_to_device(self._zero_scalars)
+        self.host_scalars[:] = 0.0
+        use_int = bool(sim.providers)
+        if use_int:
+            k.zero_kernel[k.blocks_for(sim.model.n_nodes), k.THREADS](self.f)
+            if ledger:  # the providers' energies are those of x_n
+                self.host_x()
+            hx = HostPositions(self)
+            for p in sim.providers:
+                if p is sim.cracks:
+                    p.add_forces(st.x, None, None, dt, st.step)
+                    self._sync_after_breaks(p)
+                elif p is sim.contact:
+                    p.add_forces(hx, None, None, dt, st.step)
+                else:
+                    self._host_provider(p, dt, st.step)
+        if sim.model.has_time_dependent_velocity:
+            sim.model.update_prescribed_velocity(sim.v_prescribed, st.time + 0.5 * dt)
+            self.v_prescribed.copy_to_device(sim.v_prescribed)
+        gx, gy = float(sim.gravity[0]), float(sim.gravity[1])
+        k.step_kernel[k.blocks_for(sim.model.n_triangles), k.THREADS](
+            self.x, self.v, self.tc, self.inertia, self.f, use_int, self.f_ext, bool(sim.use_external), self.flags,
+            self.v_prescribed, gx, gy, dt, float(damping.mass_proportional), float(damping.local),
+            bool(sim.use_viscous), bool(ledger), self.scalars[_STEP])
+        self._read_scalars()
+        s = self.host_scalars
+        if self._pending_contact:
+            sim.contact.book_pair_sums(*(float(e) for e in s[_CONTACT]))
+            self._pending_contact = False
+        if ledger:
+            if use_int:  # the providers' energies at x_n (the host's x still holds it)
+                if sim.cracks is not None:
+                    self._pull_cracks(sim.cracks)
+                sim._provider_terms = sim._collect_provider_terms()
+            self._x_fresh = False
+            self.pull()  # monitors and stop rules read the state after the step
+        self._x_fresh = False
+        sums = s[_STEP]
+        return StepSums(*(float(e) for e in sums[:12]), int(round(sums[12])))
+
+    def _host_provider(self, p, dt: float, step: int) -> None:
+        """A provider without a GPU loop: positions and velocities to the host, its forces back."""
+        st = self.sim.state
+        self.host_x()
+        self.v.copy_to_host(st.v)
+        f = self.f.copy_to_host()
+        p.add_forces(st.x, st.v, f, dt, step)
+        self.f.copy_to_device(f)
+        self.round_trips += 2

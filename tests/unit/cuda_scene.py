@@ -1,0 +1,86 @@
+"""The GPU backend's comparison scene, run by ``tests/unit/test_cuda_backend.py``.
+
+Run as a script in a process of its own: ``python cuda_scene.py BACKEND OUT.npz [--steps N]
+[--from CKPT] [--save CKPT]``. The GPU side runs under numba-cuda's simulator, which hands the kernels
+Python stand-ins for device arrays; the CPU laws they call must then be plain Python too, so
+that process also sets ``NUMBA_DISABLE_JIT=1`` (the test sets both variables). The scene is the
+checkpoint tests' block (``test_checkpoint.scene``): its upper part thrown sideways, crack
+elements softening and breaking in a shear band, broken faces in contact with friction history.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+STEPS = 120       # steps of the comparison (the first breaks come at step 51)
+HISTORY_EVERY = 10
+
+
+def build(backend: str):
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.contact import ContactSet
+    from fdem.physics.crack_properties import CrackProperties
+    from fdem.physics.cracks import CrackSet
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+
+    topo = build_topology(structured_rectangle(6, 6, 0.6, 0.6))
+    model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
+    model.set_gravity(0.0, -9.81)
+    model.fix("bottom")
+    model.set_initial_velocity(vx=3.0, vy=-1.5, where=np.flatnonzero(topo.x0[:, 1] > 0.35))
+    rock = CrackProperties(f_t=2e5, c=4e5, phi=30.0, G_I=5.0, G_II=20.0, p_n=1e10, name="rock")
+    cracks = CrackSet(topo, {0: rock}, contact_penalty=1e10, parallel_min=0)
+    contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
+    cracks.interfaces.set_reduction(1 / 0.8)
+    sim = Simulation(model, providers=[cracks, contact], progress=False, backend=backend)
+    return sim, cracks, contact
+
+
+def outcome(sim, cracks, contact) -> dict[str, np.ndarray]:
+    """What the comparison reads: state, crack elements, contact pairs, ledger rows."""
+    rows = sim.history
+    keys = ["kinetic", "strain", "crack_elastic", "contact_elastic", "friction", "fracture", "balance_error"]
+    keys = [k for k in keys if k in rows[0]]
+    return {
+        "x": sim.state.x, "v": sim.state.v, "step": np.array(sim.state.step), "time": np.array(sim.state.time),
+        "damage": cracks.damage_ip, "broken": cracks.broken, "dissipated": cracks.dissipated,
+        "event_elements": cracks.events["element"] if len(cracks.events) else np.zeros(0, np.int64),
+        "event_steps": cracks.events["step"] if len(cracks.events) else np.zeros(0, np.int64),
+        "pairs": contact.pairs, "touching": contact._touching, "history": contact._history,
+        "energies": np.array([contact.energy_terms()[k] for k in sorted(contact.energy_terms())]),
+        "ledger_keys": np.array(keys), "ledger": np.array([[r[k] for k in keys] for r in rows]),
+        "ledger_steps": np.array([r["step"] for r in rows]),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("backend")
+    ap.add_argument("out", help="the outcome (.npz) after the last step")
+    ap.add_argument("--steps", type=int, default=STEPS, help="the step to run to")
+    ap.add_argument("--from", dest="start", default=None, help="a checkpoint to resume from")
+    ap.add_argument("--save", default=None, help="write a checkpoint after the last step")
+    args = ap.parse_args(argv)
+    from fdem.solve import checkpoint as ck
+
+    sim, cracks, contact = build(args.backend)
+    if args.start:
+        ck.load_checkpoint(sim, args.start)
+    done = sim.state.step
+    sim.run(n_steps=args.steps - done, phase=done, history_every=HISTORY_EVERY, energy_tolerance=None,
+            stage="shear")
+    if args.save:
+        ck.save_checkpoint(sim, args.save)
+    np.savez(args.out, **outcome(sim, cracks, contact))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    sys.exit(main())

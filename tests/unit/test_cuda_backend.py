@@ -1,0 +1,116 @@
+"""The GPU backend against the CPU path, under numba-cuda's simulator (CI has no GPU).
+
+The scene (``cuda_scene.py``): a 6 x 6 block, its upper part thrown sideways; crack elements
+soften and break in a shear band from step 51 on, and the broken faces touch with friction.
+The simulator process runs the GPU loops (``fdem.kernels.cuda_step``) over the CPU's laws in
+plain Python (``NUMBA_DISABLE_JIT=1``, see ``cuda_scene.py``); the reference runs here with
+Numba. Both sides are checkpointed and resumed by the other backend:
+
+* CPU steps 0-50, checkpoint; GPU resumes it to step 62 (the first twelve breaks, contact
+  activation, searches), checkpoint; CPU resumes that to step 70;
+* GPU from step 0 to 3 (the attach at the start, the first search).
+
+Every comparison is against the CPU run that was never interrupted. Breakage (which elements,
+at which step), the contact pairs and which of them touch must be equal; the floating values
+agree to round-off: the CPU kernels run with fastmath (reassociation, fused multiply-adds), the
+simulator in plain Python, and the GPU adds crack forces and block sums with atomics in another
+order. Measured (steps 50-62, 8 elements broken, 96 pairs touching): positions 1e-16 m,
+velocities 4e-12 m/s (of 3.2 m/s), damage 2e-13, the friction springs 2e-11 and the ledger's
+terms 7e-13 of their largest value; over a 120-step run from the start (``python
+tests/unit/cuda_scene.py``, 24 broken): 2e-14 m and 9e-10 m/s. The tolerances below are about
+10^3-10^4 times the 12-step figures, far below anything physical (1e-8 m/s moves a node 1e-14 m
+a step), and far above what the reordered sums can make.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cuda_scene
+from fdem.solve.cuda_backend import BackendError, check_backend
+
+pytest.importorskip("numba.cuda", reason="numba-cuda is not installed (pip install numba-cuda)")
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+CHECKPOINT, GPU_END, CPU_END = 50, 62, 70
+
+
+def _gpu(*args, tmp: Path) -> None:
+    """Run ``cuda_scene.py cuda ...`` in a simulator process."""
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1", FDEM_CUDA_THREADS="32",
+               PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, str(HERE / "cuda_scene.py"), "cuda", *map(str, args)], env=env,
+                       capture_output=True, text=True, timeout=600, cwd=tmp)
+    assert r.returncode == 0, r.stderr[-3000:]
+
+
+def _cpu(*args) -> None:
+    assert cuda_scene.main(["cpu", *map(str, args)]) == 0
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cuda")
+    f = {name: tmp / f"{name}.npz" for name in ("ck50", "ck62g", "ref3", "ref62", "ref70", "gpu3", "gpu62",
+                                                 "cpu70", "cpu50")}
+    _cpu(f["cpu50"], "--steps", CHECKPOINT, "--save", f["ck50"])
+    _gpu(f["gpu62"], "--steps", GPU_END, "--from", f["ck50"], "--save", f["ck62g"], tmp=tmp)
+    _cpu(f["cpu70"], "--steps", CPU_END, "--from", f["ck62g"])
+    _gpu(f["gpu3"], "--steps", 3, tmp=tmp)
+    for name, steps in (("ref3", 3), ("ref62", GPU_END), ("ref70", CPU_END)):
+        _cpu(f[name], "--steps", steps)
+    return {name: dict(np.load(path)) for name, path in f.items() if not name.startswith("ck")}
+
+
+def assert_same_run(a: dict, b: dict) -> None:
+    """``a`` and ``b`` equal in every discrete outcome and to round-off in every number."""
+    assert int(a["step"]) == int(b["step"])
+    for key in ("broken", "event_elements", "event_steps", "pairs", "touching", "ledger_keys"):
+        assert np.array_equal(a[key], b[key]), key
+    assert np.abs(a["x"] - b["x"]).max() <= 1e-12                      # m
+    assert np.abs(a["v"] - b["v"]).max() <= 1e-8                       # m/s
+    assert np.abs(a["damage"] - b["damage"]).max() <= 1e-9
+    assert np.abs(a["dissipated"] - b["dissipated"]).max() <= 1e-8 * max(1.0, np.abs(a["dissipated"]).max())
+    scale = max(1.0, np.abs(a["history"]).max()) if a["history"].size else 1.0
+    assert np.abs(a["history"] - b["history"]).max(initial=0.0) <= 1e-7 * scale   # friction springs [N/m]
+    energy = max(1.0, np.abs(a["ledger"]).max())
+    # the rows of the steps both have (a run split by a checkpoint books one more, at the split)
+    common, ia, ib = np.intersect1d(a["ledger_steps"], b["ledger_steps"], return_indices=True)
+    assert common.size >= min(a["ledger_steps"].size, b["ledger_steps"].size) - 1
+    assert np.abs(a["ledger"][ia] - b["ledger"][ib]).max() <= 1e-9 * energy    # J/m
+    assert np.allclose(a["energies"], b["energies"], rtol=1e-9, atol=1e-9 * energy)
+
+
+def test_gpu_resumes_a_cpu_checkpoint_and_breaks_the_same_elements(runs):
+    gpu, ref = runs["gpu62"], runs["ref62"]
+    assert ref["broken"].sum() >= 5 and ref["touching"].sum() > 0  # the window holds breaks and contact
+    assert_same_run(gpu, ref)
+
+
+def test_cpu_resumes_a_gpu_checkpoint(runs):
+    assert_same_run(runs["cpu70"], runs["ref70"])
+
+
+def test_gpu_from_the_start(runs):
+    assert_same_run(runs["gpu3"], runs["ref3"])
+
+
+def test_unknown_backend_is_named():
+    with pytest.raises(ValueError, match="backend must be one of cpu, cuda"):
+        check_backend("opencl")
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_ENABLE_CUDASIM") == "1", reason="the simulator counts as a GPU")
+def test_cuda_without_a_gpu_stops_before_any_work():
+    from numba import cuda
+
+    if cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(BackendError, match="needs an NVIDIA GPU"):
+        cuda_scene.build("cuda")
