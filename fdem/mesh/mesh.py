@@ -81,7 +81,15 @@ class Mesh:
 
     # ------------------------------------------------------------------ I/O
     def save(self, path: str | Path) -> None:
-        """Write the mesh (triangles, tagged lines, bodies, group names) to a Gmsh ``.msh`` file."""
+        """Write the mesh (triangles, tagged lines, bodies, group names) to a Gmsh ``.msh`` file,
+        or, for a path ending in ``.npz``, to a NumPy archive: the form that carries a scene
+        meshed elsewhere to a machine with only the numerical stack (a GPU node without Gmsh
+        or meshio), read back by :meth:`load` with NumPy alone."""
+        if Path(path).suffix == ".npz":
+            np.savez_compressed(path, points=self.points, triangles=self.triangles, triangle_body=self.triangle_body,
+                                lines=self.lines, line_group=self.line_group,
+                                group_names=np.array(self.group_names, dtype=str))
+            return
         import meshio
 
         pts3 = np.column_stack([self.points, np.zeros(len(self.points))])
@@ -109,7 +117,17 @@ class Mesh:
         """Read a ``.msh`` written by :meth:`save` or by Gmsh with the same group conventions.
 
         The file's numbering is kept (a user's mesh is theirs); :func:`fdem.mesh.order.renumber`
-        puts it in memory order when asked."""
+        puts it in memory order when asked. A ``.npz`` written by :meth:`save` is read with
+        NumPy alone."""
+        if Path(path).suffix == ".npz":
+            with np.load(path, allow_pickle=False) as d:
+                missing = {"points", "triangles", "triangle_body", "lines", "line_group", "group_names"} - set(d.files)
+                if missing:
+                    raise ValueError(f"{path}: not a mesh saved by fdem (missing {', '.join(sorted(missing))})")
+                return cls(points=np.ascontiguousarray(d["points"], dtype=np.float64),
+                           triangles=d["triangles"].astype(np.int64), triangle_body=d["triangle_body"].astype(np.int32),
+                           lines=d["lines"].astype(np.int64), line_group=d["line_group"].astype(np.int32),
+                           group_names=tuple(str(n) for n in d["group_names"]))
         import meshio
 
         m = meshio.read(str(path))
