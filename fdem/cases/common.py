@@ -19,9 +19,13 @@ The slope cases (their workflow is resumable, :mod:`fdem.workflow.journal`) also
 
 ``--resume DIR``     continue the run in ``DIR`` from its ``checkpoint.npz``, with the options it
                      started with (``run.json``); only ``--threads``, ``--quiet``,
-                     ``--no-pictures``, ``--checkpoint-every``, ``--yes`` and the time-step
+                     ``--no-pictures``, ``--checkpoint-every``, ``--yes``, ``--backend`` (a
+                     run checkpointed on the CPU resumes on the GPU and back) and the time-step
                      factors ``--dt-fraction`` / ``--runout-dt-fraction`` (after an unstable
                      run: a smaller step) may be given again
+``--backend cpu|cuda``  where the steps run: Numba on the CPU (default) or an NVIDIA GPU
+                     through numba-cuda (:mod:`fdem.solve.cuda_backend`); ``cuda`` on a machine
+                     without a GPU is a bad option (exit code 2)
 ``--dt-fraction F``   time-step factor of the quasi-static stages, a fraction of the critical step
                      (default 0.8)
 ``--checkpoint-every S``  wall-clock seconds between periodic checkpoints inside a stage
@@ -43,6 +47,9 @@ import os
 import sys
 from pathlib import Path
 
+from fdem.solve.cuda_backend import BACKENDS, BackendError
+from fdem.solve.simulation import set_default_backend
+
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
            "prepare_run", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
@@ -60,7 +67,7 @@ OUTPUT_SUFFIXES = (".vtu", ".pvd", ".png", ".npz", ".csv", ".json", ".msh", ".gi
 """What ``--overwrite`` removes from the top of an output folder that holds an earlier run."""
 
 RESUME_OPTIONS = ("--threads", "--quiet", "--no-pictures", "--checkpoint-every", "--yes", "--dt-fraction",
-                  "--runout-dt-fraction")
+                  "--runout-dt-fraction", "--backend")
 """The options that ``--resume`` accepts beside it (the others come from the run's ``run.json``)."""
 
 SMALL_MESH_TRIANGLES = 20_000
@@ -91,6 +98,9 @@ def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the earlier run in --out (its frames, pictures, checkpoints and summary)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars, only warnings and the result")
+    parser.add_argument("--backend", choices=BACKENDS, default="cpu",
+                        help="where the steps run: cpu (Numba, default) or cuda (an NVIDIA GPU through numba-cuda; "
+                             "the same laws, docs/gpu.md)")
     return parser
 
 
@@ -161,6 +171,10 @@ def check_common(parser: argparse.ArgumentParser, args) -> None:
     from fdem.io.messages import configure
 
     configure(quiet=getattr(args, "quiet", False))
+    try:  # a GPU asked for where there is none stops here, before any meshing
+        set_default_backend(getattr(args, "backend", "cpu"))
+    except BackendError as err:
+        parser.error(f"--backend {args.backend}: {err}")
     sizes = args.size if isinstance(args.size, list) else [] if args.size is None else [args.size]
     if any(not (math.isfinite(h) and h > 0) for h in sizes):
         parser.error(f"--size must be a positive number of metres, got {args.size}")

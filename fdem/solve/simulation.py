@@ -67,7 +67,22 @@ from fdem.solve.ledger import EnergyLedger, work_halves
 from fdem.solve.cuda_backend import BackendError, CudaBackend, check_backend
 
 __all__ = ["ForceProvider", "State", "InstabilityError", "provider_crack_fields", "Simulation", "StopRequest",
-           "STOP", "MONITOR_QUANTITIES", "PointMonitor"]
+           "STOP", "MONITOR_QUANTITIES", "PointMonitor", "set_default_backend", "default_backend"]
+
+_DEFAULT_BACKEND = "cpu"
+
+
+def set_default_backend(name: str) -> None:
+    """The backend of every later :class:`Simulation` that names none (``fdem run ... --backend``
+    sets it for the whole run, as ``--threads`` sets Numba's threads); checked here, so a GPU
+    asked for on a machine without one stops before any work."""
+    global _DEFAULT_BACKEND
+    _DEFAULT_BACKEND = check_backend(name)
+
+
+def default_backend() -> str:
+    """The backend a :class:`Simulation` gets when it names none (``"cpu"`` unless set)."""
+    return _DEFAULT_BACKEND
 
 
 class StopRequest:
@@ -220,8 +235,8 @@ class Simulation:
         Regions at rest stop being stepped until a force reaches them or the load changes
         (:mod:`fdem.solve.sleeping`); ``True`` takes the default policy. Default off. Needs an
         exploded mesh and gravity. :attr:`sleeping` holds the state (``None`` when off).
-    backend : ``"cpu"`` (default) or ``"cuda"``
-        Where the steps run: Numba's CPU loops, or an NVIDIA GPU through numba-cuda
+    backend : ``"cpu"`` or ``"cuda"``, optional
+        Default :func:`default_backend` (``"cpu"`` unless a case's ``--backend`` set it). Where the steps run: Numba's CPU loops, or an NVIDIA GPU through numba-cuda
         (:mod:`fdem.solve.cuda_backend`: the same laws, the state on the device during each
         :meth:`run`). ``"cuda"`` without a GPU raises :class:`~fdem.solve.cuda_backend.BackendError`
         here, before any work.
@@ -232,13 +247,13 @@ class Simulation:
                  output_fields=None, compression: str | None = "zlib", time_cap: float | None = None,
                  density_scaling: float | None = density_scaling.DEFAULT_MASS_BUDGET,
                  sleeping: bool | SleepPolicy | None = None, output_precision: str = "float32",
-                 backend: str = "cpu"):
+                 backend: str | None = None):
         if not 0.0 < dt_fraction <= 1.0:
             raise ValueError(f"dt_fraction (fraction of the critical time step) must lie in (0, 1], got {dt_fraction}")
         if density_scaling is not None and not (math.isfinite(density_scaling) and 0.0 <= density_scaling <= 1.0):
             raise ValueError(f"density_scaling (added-mass budget, a fraction of the model's mass) must lie in "
                              f"[0, 1] or be None, got {density_scaling!r}")
-        self.backend = check_backend(backend)  # before any work: no GPU, no run
+        self.backend = check_backend(backend or _DEFAULT_BACKEND)  # before any work: no GPU, no run
         self._device: CudaBackend | None = None
         self.density_scaling = density_scaling or None
         self.inertia: np.ndarray | None = None  # inertial node masses while density-scaled, else None

@@ -66,15 +66,22 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=STEPS, help="the step to run to")
     ap.add_argument("--from", dest="start", default=None, help="a checkpoint to resume from")
     ap.add_argument("--save", default=None, help="write a checkpoint after the last step")
+    ap.add_argument("--quasi-static", action="store_true",
+                    help="a quasi-static stage: density-scaled masses, mass-proportional and local damping")
     args = ap.parse_args(argv)
     from fdem.solve import checkpoint as ck
+    from fdem.solve.damping import Damping
 
     sim, cracks, contact = build(args.backend)
     if args.start:
         ck.load_checkpoint(sim, args.start)
     done = sim.state.step
+    damping = None
+    if args.quasi_static:
+        sim.set_density_scaling(True)
+        damping = Damping(mass_proportional=200.0, local=0.3)
     sim.run(n_steps=args.steps - done, phase=done, history_every=HISTORY_EVERY, energy_tolerance=None,
-            stage="shear")
+            stage="shear", damping=damping)
     if args.save:
         ck.save_checkpoint(sim, args.save)
     np.savez(args.out, **outcome(sim, cracks, contact))

@@ -8,7 +8,9 @@ Numba. Both sides are checkpointed and resumed by the other backend:
 
 * CPU steps 0-50, checkpoint; GPU resumes it to step 62 (the first twelve breaks, contact
   activation, searches), checkpoint; CPU resumes that to step 70;
-* GPU from step 0 to 3 (the attach at the start, the first search).
+* GPU from step 0 to 3 (the attach at the start, the first search);
+* a quasi-static stage (density-scaled masses, mass-proportional and local damping), GPU from
+  the CPU's step-50 checkpoint to step 56.
 
 Every comparison is against the CPU run that was never interrupted. Breakage (which elements,
 at which step), the contact pairs and which of them touch must be equal; the floating values
@@ -58,11 +60,13 @@ def _cpu(*args) -> None:
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cuda")
     f = {name: tmp / f"{name}.npz" for name in ("ck50", "ck62g", "ref3", "ref62", "ref70", "gpu3", "gpu62",
-                                                 "cpu70", "cpu50")}
+                                                 "cpu70", "cpu50", "qs56", "gqs56")}
     _cpu(f["cpu50"], "--steps", CHECKPOINT, "--save", f["ck50"])
     _gpu(f["gpu62"], "--steps", GPU_END, "--from", f["ck50"], "--save", f["ck62g"], tmp=tmp)
     _cpu(f["cpu70"], "--steps", CPU_END, "--from", f["ck62g"])
     _gpu(f["gpu3"], "--steps", 3, tmp=tmp)
+    _gpu(f["gqs56"], "--steps", 56, "--from", f["ck50"], "--quasi-static", tmp=tmp)
+    _cpu(f["qs56"], "--steps", 56, "--from", f["ck50"], "--quasi-static")
     for name, steps in (("ref3", 3), ("ref62", GPU_END), ("ref70", CPU_END)):
         _cpu(f[name], "--steps", steps)
     return {name: dict(np.load(path)) for name, path in f.items() if not name.startswith("ck")}
@@ -99,6 +103,10 @@ def test_cpu_resumes_a_gpu_checkpoint(runs):
 
 def test_gpu_from_the_start(runs):
     assert_same_run(runs["gpu3"], runs["ref3"])
+
+
+def test_gpu_quasi_static_stage(runs):
+    assert_same_run(runs["gqs56"], runs["qs56"])
 
 
 def test_unknown_backend_is_named():
