@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Protocol, runtime_checkable
@@ -608,6 +609,21 @@ class Simulation:
             if alone:
                 dev.detach()
         return sums
+
+    @contextmanager
+    def device_session(self):
+        """``with sim.device_session(): sim.step(); ...``: keep the GPU backend's state on the
+        device across bare :meth:`step` calls (as :meth:`run` does) and bring it back at the end;
+        a no-op on the CPU. Without it, each bare step copies the whole state both ways."""
+        dev = self._device
+        if dev is None or dev.attached:
+            yield self
+            return
+        dev.attach()
+        try:
+            yield self
+        finally:
+            dev.detach()
 
     def sync_host(self, state_only: bool = False) -> None:
         """Bring the GPU's state to the host arrays during a run (no-op on the CPU):

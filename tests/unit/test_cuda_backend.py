@@ -43,10 +43,11 @@ ROOT = HERE.parents[1]
 CHECKPOINT, GPU_END, CPU_END = 50, 62, 70
 
 
-def _gpu(*args, tmp: Path) -> None:
-    """Run ``cuda_scene.py cuda ...`` in a simulator process."""
-    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1", FDEM_CUDA_THREADS="32",
-               PYTHONPATH=str(ROOT))
+def _gpu(*args, tmp: Path, simulator: bool = True) -> None:
+    """Run ``cuda_scene.py cuda ...`` in a process of its own: the simulator's, or the real GPU's."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    if simulator:
+        env.update(NUMBA_ENABLE_CUDASIM="1", NUMBA_DISABLE_JIT="1", FDEM_CUDA_THREADS="32")
     r = subprocess.run([sys.executable, str(HERE / "cuda_scene.py"), "cuda", *map(str, args)], env=env,
                        capture_output=True, text=True, timeout=600, cwd=tmp)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -107,6 +108,23 @@ def test_gpu_from_the_start(runs):
 
 def test_gpu_quasi_static_stage(runs):
     assert_same_run(runs["gqs56"], runs["qs56"])
+
+
+def _real_gpu() -> bool:
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
+        return False
+    from numba import cuda
+
+    return cuda.is_available()
+
+
+@pytest.mark.skipif(not _real_gpu(), reason="no NVIDIA GPU on this machine (the simulator tests above run)")
+def test_real_gpu_matches_cpu(runs, tmp_path):
+    """The same comparison on the device itself (compiled kernels, hardware atomics)."""
+    ck = tmp_path / "ck50.npz"
+    _cpu(tmp_path / "cpu50.npz", "--steps", CHECKPOINT, "--save", ck)
+    _gpu(tmp_path / "dev62.npz", "--steps", GPU_END, "--from", ck, tmp=tmp_path, simulator=False)
+    assert_same_run(dict(np.load(tmp_path / "dev62.npz")), runs["ref62"])
 
 
 def test_unknown_backend_is_named():
