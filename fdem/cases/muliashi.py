@@ -48,7 +48,7 @@ from fdem.geometry.polygons import simple_slope
 from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "BRIDGE_COHESION", "bridge_cohesion",
-           "property_sets", "build", "meso_views", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
+           "property_sets", "GROUND_TAG_OFFSET", "ground_tags", "build", "meso_views", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
            "JOINT_COHESION", "JOINT_FRICTION"]
 
 
@@ -163,14 +163,38 @@ def property_sets(size: float, intact_phi: float = 30.0, penalty_ratio: float = 
             for t, q in sets.items()}
 
 
+GROUND_TAG_OFFSET = 2  # crack tag t below the toe's elevation -> t + 2 in the slide model's crack set
+
+
+def ground_tags(topology, toe_y: float) -> np.ndarray:
+    """(n_cracks,) crack tags of the slide model: ``topology.crack_tag``, with the elements of
+    body 0 whose reference midpoint lies below the toe's elevation ``toe_y`` [m] moved to
+    ``tag + GROUND_TAG_OFFSET`` (the ground under the floor and under the slope), so that
+    :func:`build` can give them the unreduced strengths."""
+    tag = np.asarray(topology.crack_tag, dtype=np.int32).copy()
+    mid_y = topology.x0[topology.crack_nodes[:, :2], 1].mean(axis=1)
+    body = np.asarray(topology.triangle_body)[topology.crack_triangles[:, 0]]
+    ground = (mid_y < toe_y) & (body == 0)
+    tag[ground] += GROUND_TAG_OFFSET
+    return tag
+
+
 def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_dir=None, pictures: bool = True,
-          heterogeneity_seed: int = 1, progress: bool = True, strength_factor: float = 1.0, wall: bool = False):
+          heterogeneity_seed: int = 1, progress: bool = True, strength_factor: float = 1.0, wall: bool = False,
+          full_strength_ground: bool = True):
     """Geometry, mesh, model in static equilibrium, crack elements, contact and the simulation.
 
     Supports as the paper: x fixed on the left and right sides, x and y fixed at the bottom.
     ``wall``: a fixed rigid body 1 m thick, 0.1 m left of the model and as high as it, which the
     debris meets as the paper's particles meet its left wall (without it debris past the 15.5 m
-    floor falls off the model and never comes to rest)."""
+    floor falls off the model and never comes to rest).
+
+    ``full_strength_ground`` (with ``strength_factor`` k != 1): the ground below the toe's
+    elevation keeps the unreduced strengths (the crack set's tags moved by :func:`ground_tags`;
+    the model's own tags, which the pictures read, unchanged). The failure that k measures is the
+    slope's, above the toe (the sliding base runs on the lowest joint layer); reduced by k the
+    ground is k times too weak for a slide at 1 g: the release of the slope's stress when it
+    fails cracked the floor of the slide down to the model's base (docs/cases.md B)."""
     from fdem.physics.cracks import CrackSet
     from fdem.physics.heterogeneity import Heterogeneity
     from fdem.physics.contact import ContactSet
@@ -204,8 +228,22 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
         model.roller("right", "x")
     model.set_element_damping()
     sets = property_sets(size, strength_factor=strength_factor)
-    cracks = CrackSet(topo, sets, contact_penalty=sets[0].p_n,
-                      heterogeneity=Heterogeneity("normal", cov=0.1, seed=heterogeneity_seed, tags=(0,)))
+    crack_topo, random_tags = topo, (0,)
+    if full_strength_ground and strength_factor != 1.0:
+        from fdem.geometry.polygons import slope_toe
+
+        tags = ground_tags(topo, slope_toe(geometry.bodies[0])[1])
+        full = property_sets(size)
+        for t in np.unique(tags[tags >= GROUND_TAG_OFFSET]) - GROUND_TAG_OFFSET:
+            sets[int(t) + GROUND_TAG_OFFSET] = dataclasses.replace(full[int(t)], name=f"{full[int(t)].name} below the toe")
+        crack_topo = dataclasses.replace(topo, crack_tag=tags)
+        random_tags = (0, GROUND_TAG_OFFSET)  # the same draws as without: Heterogeneity draws for all elements
+    cracks = CrackSet(crack_topo, sets, contact_penalty=sets[0].p_n,
+                      heterogeneity=Heterogeneity("normal", cov=0.1, seed=heterogeneity_seed, tags=random_tags))
+    # The crack set reads the tags once, when it is built (its own ``tag`` from then on); it
+    # then shares the model's topology, whose tags stay the geometry's (0 intact, j joint set
+    # j): the pictures draw tags > 0 as joints, and the ground is no joint.
+    cracks.topology = topo
     report = geostatic_start(model, cracks)
     contact = ContactSet(topo, sets[0].p_n, friction_angle=JOINT_FRICTION, mass=model.node_mass(), cracks=cracks)
     sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="muliashi", pictures=pictures,

@@ -122,14 +122,23 @@ def test_fragment_statistics_leaves_out_excluded_triangles_and_their_bonds():
         fragment_statistics(topo, intact, exclude=support[:3])
 
 
-def test_muliashi_fixed_wall_is_no_fragment():
+@pytest.fixture(scope="module")
+def slide_model():
+    """The Muliashi slide model at 2 m elements, strengths / 20, with its wall (15 s to build)."""
+    from fdem.cases.muliashi import build
+
+    _, sim, cracks, _ = build(2.0, wall=True, progress=False, pictures=False, strength_factor=20.0)
+    yield sim, cracks
+    sim.close()
+
+
+def test_muliashi_fixed_wall_is_no_fragment(slide_model):
     """The slide model's left wall (a body fixed in x and y at every node) is a support: the
     run's fragment count is the slope alone, intact one fragment, fully broken one per triangle."""
-    from fdem.cases.muliashi import build
     from fdem.results.analysis import fragment_statistics
     from fdem.results.report import RunReport, fixed_body_triangles
 
-    _, sim, cracks, _ = build(2.0, wall=True, progress=False, pictures=False)
+    sim, cracks = slide_model
     topo = sim.model.topology
     wall = topo.triangle_body == 1
     assert wall.any() and np.array_equal(fixed_body_triangles(sim.model), wall)
@@ -138,7 +147,28 @@ def test_muliashi_fixed_wall_is_no_fragment():
     assert frag["n_fragments"] == frag["n_blocks"] == 1 and frag["largest_share"] == 1.0
     every = fragment_statistics(topo, np.ones(topo.n_cracks, bool), exclude=wall)
     assert every["n_fragments"] == every["n_single_triangles"] == int((~wall).sum())
-    sim.close()
+
+
+def test_muliashi_slide_model_keeps_the_ground_below_the_toe_at_full_strength(slide_model):
+    """Strengths / k are the slope's limit state; the ground below the toe's elevation takes no
+    part in that failure and keeps the unreduced set (same heterogeneity draws), while the
+    model's own tags (what the pictures show as joints) stay the geometry's."""
+    from fdem.cases.muliashi import GROUND_TAG_OFFSET, property_sets
+
+    sim, cracks = slide_model
+    topo = sim.model.topology
+    mid_y = topo.x0[topo.crack_nodes[:, :2], 1].mean(axis=1)
+    ground = (mid_y < 7.5) & (topo.triangle_body[topo.crack_triangles[:, 0]] == 0)  # toe at y = 7.5 m
+    assert ground.any() and (~ground).any()
+    assert np.array_equal(cracks.tag[ground], topo.crack_tag[ground] + GROUND_TAG_OFFSET)
+    assert np.array_equal(cracks.tag[~ground], topo.crack_tag[~ground])
+    assert set(np.unique(topo.crack_tag)) <= {0, 1}
+    full, weak = property_sets(2.0), property_sets(2.0, strength_factor=20.0)
+    g = cracks.property_sets[GROUND_TAG_OFFSET]
+    assert (g.f_t, g.c, g.G_I, g.G_II) == (full[0].f_t, full[0].c, full[0].G_I, full[0].G_II)
+    assert (cracks.property_sets[0].f_t, cracks.property_sets[0].G_I) == (weak[0].f_t, weak[0].G_I)
+    h = cracks.strength_multiplier[ground & (topo.crack_tag == 0)]
+    assert 0.05 < h.std() < 0.15  # the bridges' cov 0.1 reaches the ground too
 
 
 def test_floor_cracking_counts_broken_elements_below_the_toe_by_place_and_depth():
