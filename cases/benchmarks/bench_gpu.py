@@ -13,8 +13,9 @@ the default workflow, runout to rest with no cap), its wall time, steps and brac
 
 Each writes ``docs/benchmarks/gpu_<figure>.json`` with the device, its driver and the
 numba-cuda version; the CPU figures of the same scenes are in ``full_step.json`` and
-``fragmented.json``. ``--launches`` adds a count of kernel launches and host round trips per
-step. A machine without a GPU stops at once with the backend's error.
+``fragmented.json``. The step figures time ``Simulation.run`` in chunks of 256 steps and record
+the host round trips per step; ``--max-batch 1`` measures them without speculative batches.
+A machine without a GPU stops at once with the backend's error.
 """
 from __future__ import annotations
 
@@ -69,14 +70,23 @@ def save(name: str, recs: list[dict], **meta) -> None:
     records.save(name, recs, **meta)
 
 
-def _rate(sim, n_tri: int, seconds: float, repeats: int) -> tuple[float, dict]:
-    with sim.device_session():
-        dev = sim._device
-        trips0 = dev.round_trips
-        rate = best_rate(sim.step, n_tri, seconds, repeats)
-        steps = max(1, sim.state.step)
-        per_step = {"round_trips_per_step": (dev.round_trips - trips0) / steps}
-    return rate, per_step
+def _rate(sim, n_tri: int, seconds: float, repeats: int, max_batch: int) -> tuple[float, dict]:
+    """Triangle-steps per second of ``sim.run`` in chunks of 256 steps (history rows at the chunk
+    ends, as a run has them), and the round trips per step."""
+    dev = sim._device
+    dev.max_batch = max_batch
+    dev.batch_limit = min(dev.batch_limit, max_batch)
+    chunk = 256
+    step0, trips0 = sim.state.step, dev.round_trips
+
+    def run_chunk():
+        sim.run(n_steps=chunk, history_every=chunk, output_every=10 ** 9, energy_tolerance=None,
+                final_output=False, progress=False)
+
+    rate = best_rate(run_chunk, n_tri * chunk, seconds, repeats)
+    steps = max(1, sim.state.step - step0)
+    return rate, {"round_trips_per_step": (dev.round_trips - trips0) / steps, "max_batch": max_batch,
+                  "batches_run": dev.batches_run, "batches_refused": dev.batches_refused}
 
 
 def intact(args) -> None:
@@ -84,7 +94,7 @@ def intact(args) -> None:
 
     sim, _ = intact_block(args.triangles)
     n_tri = sim.model.n_triangles
-    rate, extra = _rate(sim, n_tri, args.seconds, args.repeats)
+    rate, extra = _rate(sim, n_tri, args.seconds, args.repeats, args.max_batch)
     save("gpu_intact", [record("full intact step on the GPU (cracks + triangles + integration)", rate,
                                "triangle-steps/s", n_tri, None, n_crack_elements=sim.model.topology.n_cracks,
                                goal=1e9, **extra)], **gpu_info())
@@ -98,7 +108,7 @@ def fragmented(args) -> None:
     with sim.device_session():
         settle(sim, n_rows)
     n_tri = sim.model.n_triangles
-    rate, extra = _rate(sim, n_tri, args.seconds, args.repeats)
+    rate, extra = _rate(sim, n_tri, args.seconds, args.repeats, args.max_batch)
     save("gpu_fragmented", [record("fully fragmented step on the GPU (contact + triangles + integration)", rate,
                                    "triangle-steps/s", n_tri, None, pairs=int(contact.n_pairs),
                                    touching=int(contact.n_touching), goal=1e8, **extra)], **gpu_info())
@@ -128,6 +138,8 @@ def main(argv=None) -> int:
         p.add_argument("--triangles", type=int, default=default)
         p.add_argument("--seconds", type=float, default=2.0, help="timing window of each sample")
         p.add_argument("--repeats", type=int, default=3)
+        p.add_argument("--max-batch", type=int, default=64,
+                       help="longest speculative batch of steps per round trip (1: none, one round trip a step)")
     p = sub.add_parser("workflow")
     p.add_argument("--size", type=float, default=0.18)
     p.add_argument("--out", default="runs/gpu_four_slopes")

@@ -114,7 +114,7 @@ class CudaBackend:
     and :meth:`host_x` (their ``device`` attribute is this object while attached).
     """
 
-    def __init__(self, sim):
+    def __init__(self, sim, max_batch: int = 64):
         self.cuda = require_cuda()
         from fdem.kernels import cuda_step  # compiles nothing yet: kernels compile at first launch
 
@@ -129,6 +129,16 @@ class CudaBackend:
         self._moved_read = False  # the contact trigger of this step has come back
         self._after_breaks = False  # the host cleared break flags that the device must get
         self.round_trips = 0  # synchronising copies so far (for the benchmarks)
+        self.batches_run = 0  # speculative batches that stood, and those refused (try_batch)
+        self.batches_refused = 0
+        self._contact_in_batch = False
+        self._kept_shapes = None
+        self._kept: list = []
+        if max_batch < 1:
+            raise ValueError(f"max_batch must be at least 1 (1: no batches), got {max_batch}")
+        self.max_batch = max_batch  # longest speculative batch (try_batch); 1 turns batches off
+        self.batch_limit = min(8, max_batch)  # the next batch's length: doubled when one stands, halved when refused
+        self._singles = 0
 
     # ------------------------------------------------------------------ transfers
     def _to(self, a):
@@ -229,14 +239,8 @@ class CudaBackend:
         Launches the contact search's trigger in the same round trip. When elements broke, the
         host's element arrays are brought up to date for :meth:`CrackSet._register_breaks`,
         and after it the live list and the cleared flags go back."""
-        k = self.k
-        if cs._run is not self._run_host:
-            self._push_run(cs)
-        if self._n_run:
-            k.crack_kernel[k.blocks_for(self._n_run), k.THREADS](
-                self.x, self.f, self.c_nodes, self.c_const, self.c_status, self.c_state, self.c_diss,
-                self.c_offset, self.c_dil, self.c_run, self.c_broke, self.scalars[_COUNTS])
-        self._launch_moved()
+        self._launch_cracks(cs, self.scalars)
+        self._launch_moved(self.scalars)
         self._read_scalars()
         self._moved_read = True
         n_broke = int(self.host_scalars[_COUNTS][0])
@@ -247,6 +251,16 @@ class CudaBackend:
         elif n_left_elastic:  # contact watches the inelastic elements through the status
             self.c_status.copy_to_host(cs._status)
         return n_broke
+
+    def _launch_cracks(self, cs, row) -> None:
+        """The crack kernel, its counts into ``row`` (a device row of :data:`_SCALARS`)."""
+        k = self.k
+        if cs._run is not self._run_host:
+            self._push_run(cs)
+        if self._n_run:
+            k.crack_kernel[k.blocks_for(self._n_run), k.THREADS](
+                self.x, self.f, self.c_nodes, self.c_const, self.c_status, self.c_state, self.c_diss,
+                self.c_offset, self.c_dil, self.c_run, self.c_broke, row[_COUNTS])
 
     def _sync_after_breaks(self, cs) -> None:
         if self._after_breaks:
@@ -287,19 +301,19 @@ class CudaBackend:
             self.p_witness.copy_to_host(co._witness)
             self.p_ft.copy_to_host(co._f_target)
 
-    def _launch_moved(self) -> None:
+    def _launch_moved(self, row) -> None:
         co = self.sim.contact
         if co is None or co.device is None or self._pair_key is not co.pairs or not self._n_active:
             return
         k = self.k
         k.moved_kernel[k.blocks_for(self._n_active), k.THREADS](self.x, self.p_x_search, self.p_active,
-                                                               self.scalars[_MOVED:_MOVED + 1])
+                                                               row[_MOVED:_MOVED + 1])
 
     def contact_moved(self) -> float:
         """Largest displacement of an active contact node since the last search [m] (this step's
         trigger, read back with the crack counts)."""
         if not self._moved_read:  # no crack kernel ran: the trigger has its own round trip
-            self._launch_moved()
+            self._launch_moved(self.scalars)
             self._read_scalars()
             self._moved_read = True
         return float(np.sqrt(self.host_scalars[_MOVED]))
@@ -307,16 +321,19 @@ class CudaBackend:
     def contact_forces(self, co, dt: float) -> None:
         """The pair and gather kernels into the device's force array (the pairs are sent again
         when a search has changed them); the sums are booked after the step's round trip."""
-        k = self.k
         if self._pair_key is not co.pairs:
             self._push_contact(co)
+        self._launch_contact(co, dt, self.scalars)
+        self._pending_contact = True
+
+    def _launch_contact(self, co, dt: float, row) -> None:
+        k = self.k
         if self._n_contactors:
             k.contact_kernel[k.blocks_for(self._n_contactors), k.THREADS](
                 self.x, self.v, self.p_i, self.p_j, self.p_starts, co.penalty, self.p_mu, self.p_kt, self.p_damp,
-                dt, self.p_hist, self.p_ft, self.p_touch, self.p_witness, self.f, self.scalars[_CONTACT])
+                dt, self.p_hist, self.p_ft, self.p_touch, self.p_witness, self.f, row[_CONTACT])
             k.gather_kernel[k.blocks_for(self._n_active), k.THREADS](
                 self.f, self.p_active, self.p_inc_ptr, self.p_inc_pair, self.p_ft, self.p_touch)
-        self._pending_contact = True
 
     # ------------------------------------------------------------------ the step
     def _read_scalars(self) -> None:
@@ -349,11 +366,7 @@ class CudaBackend:
         if sim.model.has_time_dependent_velocity:
             sim.model.update_prescribed_velocity(sim.v_prescribed, st.time + 0.5 * dt)
             self.v_prescribed.copy_to_device(sim.v_prescribed)
-        gx, gy = float(sim.gravity[0]), float(sim.gravity[1])
-        k.step_kernel[k.blocks_for(sim.model.n_triangles), k.THREADS](
-            self.x, self.v, self.tc, self.inertia, self.f, use_int, self.f_ext, bool(sim.use_external), self.flags,
-            self.v_prescribed, gx, gy, dt, float(damping.mass_proportional), float(damping.local),
-            bool(sim.use_viscous), bool(ledger), self.scalars[_STEP])
+        self._launch_step(damping, ledger, use_int, self.scalars)
         self._read_scalars()
         s = self.host_scalars
         if self._pending_contact:
@@ -368,6 +381,108 @@ class CudaBackend:
             self.pull()  # monitors and stop rules read the state after the step
         self._x_fresh = False
         sums = s[_STEP]
+        return StepSums(*(float(e) for e in sums[:12]), int(round(sums[12])))
+
+    def _launch_step(self, damping, ledger: bool, use_int: bool, row) -> None:
+        sim, k = self.sim, self.k
+        gx, gy = float(sim.gravity[0]), float(sim.gravity[1])
+        k.step_kernel[k.blocks_for(sim.model.n_triangles), k.THREADS](
+            self.x, self.v, self.tc, self.inertia, self.f, use_int, self.f_ext, bool(sim.use_external), self.flags,
+            self.v_prescribed, gx, gy, sim.dt, float(damping.mass_proportional), float(damping.local),
+            bool(sim.use_viscous), bool(ledger), row[_STEP])
+
+    # ------------------------------------------------------------------ speculative batches
+    def _batchable(self) -> bool:
+        """Whether the host would do nothing between the next steps unless the device's counts
+        say so: no provider without a GPU loop, no time-dependent supports, no break handed on,
+        no search asked for, no crack element under contact's watch (its gap is checked on the
+        host every few steps)."""
+        sim = self.sim
+        if self.host_providers or sim.model.has_time_dependent_velocity:
+            return False
+        cs, co = sim.cracks, sim.contact
+        if cs is not None and (cs._carry_broken.size or cs._run is not self._run_host):
+            return False
+        if co is not None and not co.dormant:
+            if co._needs_search or co._x_search is None or self._pair_key is not co.pairs:
+                return False
+            if co.cracks is not None and co.softening != "all" and (co._watch is None or co._watch.size):
+                return False
+        return True
+
+    def _state_arrays(self) -> list:
+        """The device arrays a batch changes (restored when it is refused)."""
+        arrays = [self.x, self.v]
+        if self.sim.cracks is not None:
+            arrays += [self.c_status, self.c_state, self.c_diss, self.c_broke]
+        if self.sim.contact is not None and self._n_pairs:
+            arrays += [self.p_hist, self.p_ft, self.p_touch, self.p_witness]
+        return arrays
+
+    def _kept_copies(self) -> list:
+        """Device buffers shaped like :meth:`_state_arrays`, allocated again only when a shape
+        changed (a search changes the pair arrays)."""
+        shapes = [(a.shape, a.dtype) for a in self._state_arrays()]
+        if self._kept_shapes != shapes:
+            self._kept = [self.cuda.device_array(shape, dtype) for shape, dtype in shapes]
+            self._kept_shapes = shapes
+        return self._kept
+
+    def try_batch(self, damping, n_steps: int) -> np.ndarray | None:
+        """Run ``n_steps`` plain steps (no history row among them) with one round trip instead of
+        two a step, speculatively: the state is kept on the device, the steps run, and their rows
+        come back at once. The batch stands when the host would have done nothing in any of
+        its steps (no element broke or left the elastic range, the contactors stayed within
+        half the skin, no triangle inverted); then the rows (n_steps, 20) are returned, for
+        :meth:`book_row` step by step. Otherwise the kept state is put back and ``None``
+        returned: the caller steps one by one, and the next batch is half as long."""
+        sim = self.sim
+        n_steps = min(n_steps, self.batch_limit)
+        if n_steps < 2:
+            self._singles += 1
+            if self.max_batch > 1 and self._singles >= 32:  # a quiet spell may have begun: try again
+                self.batch_limit, self._singles = 2, 0
+            return None
+        if not self._batchable():
+            return None
+        kept = self._kept_copies()
+        for dst, src in zip(kept, self._state_arrays()):
+            dst.copy_to_device(src)
+        rows = self.cuda.to_device(np.zeros((n_steps, _SCALARS)))
+        use_int = bool(sim.providers)
+        cs, co = sim.cracks, sim.contact
+        contact_on = co is not None and not co.dormant and len(co.pairs) > 0
+        for j in range(n_steps):
+            row = rows[j]
+            if use_int:
+                self.k.zero_kernel[self.k.blocks_for(sim.model.n_nodes), self.k.THREADS](self.f)
+                if cs is not None and cs._run.size:
+                    self._launch_cracks(cs, row)
+                if contact_on:
+                    self._launch_moved(row)
+                    self._launch_contact(co, sim.dt, row)
+            self._launch_step(damping, False, use_int, row)
+        host = rows.copy_to_host()
+        self.round_trips += 1
+        limit = (0.5 * co.skin) ** 2 if contact_on and co.full_search else np.inf
+        clean = (not host[:, _COUNTS].any() and not host[:, _STEP][:, 12].any()
+                 and bool((host[:, _MOVED] <= limit).all()))
+        if not clean:
+            for dst, src in zip(self._state_arrays(), kept):
+                dst.copy_to_device(src)
+            self.batches_refused += 1
+            self.batch_limit = max(1, self.batch_limit // 2)
+            return None
+        self.batches_run += 1
+        self.batch_limit = min(self.max_batch, 2 * self.batch_limit)
+        self._contact_in_batch = contact_on
+        return host
+
+    def book_row(self, row: np.ndarray) -> StepSums:
+        """One step of a batch that stood: its contact sums booked, its step sums returned."""
+        if self._contact_in_batch:
+            self.sim.contact.book_pair_sums(*(float(e) for e in row[_CONTACT]))
+        sums = row[_STEP]
         return StepSums(*(float(e) for e in sums[:12]), int(round(sums[12])))
 
     def _host_provider(self, p, dt: float, step: int) -> None:

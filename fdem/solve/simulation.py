@@ -692,10 +692,19 @@ class Simulation:
         if self._device is not None:
             self._device.attach()
         try:
+            queued: list = []  # rows of a GPU batch that stood, booked one step at a time
             for k in range(phase, phase + n_steps):
                 is_ledger = (k % history_every == 0) or k == phase + n_steps - 1
                 step_before, time_before = self.state.step, self.state.time
-                sums = self.step(damping, ledger=is_ledger)
+                if not queued and self._device is not None and not is_ledger:
+                    rows = self._device.try_batch(damping, self._plain_steps_ahead(
+                        k, phase + n_steps, history_every, checkpoint_every, output_every))
+                    queued = [] if rows is None else list(rows)
+                if queued:
+                    sums = self._device.book_row(queued.pop(0))
+                    self._book_step(sums, False)
+                else:
+                    sums = self.step(damping, ledger=is_ledger)
                 self._check(sums, step_before, time_before, is_ledger, energy_tolerance)
                 if is_ledger:
                     row = self.last_row
@@ -711,7 +720,7 @@ class Simulation:
                     self._good = self.state.copy()
                 if (k + 1) % output_every == 0 and k + 1 < phase + n_steps:
                     self.write_output()
-                if STOP.pending is not None:
+                if STOP.pending is not None and not queued:  # a batch's state is that of its end
                     STOP.honour()
                 if bar is not None:
                     bar_chunk += 1
@@ -732,6 +741,20 @@ class Simulation:
                 bar.update(bar_chunk)
                 bar.close()
         return self
+
+    @staticmethod
+    def _plain_steps_ahead(k: int, end: int, history_every: int, checkpoint_every: int, output_every: int) -> int:
+        """How many steps from loop index ``k`` on are plain in :meth:`run` (no history row among
+        them, and no good-state copy or frame before the last): what a GPU batch may cover."""
+        n = 0
+        while k + n < end and n < 1024:
+            j = k + n
+            if j % history_every == 0 or j == end - 1:
+                break
+            n += 1
+            if (j + 1) % checkpoint_every == 0 or (j + 1) % output_every == 0:
+                break
+        return n
 
     def _record(self, sums, step: int, time: float) -> dict:
         early, late = work_halves(sums)

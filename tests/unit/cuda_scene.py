@@ -84,7 +84,10 @@ def main(argv=None) -> int:
             stage="shear", damping=damping)
     if args.save:
         ck.save_checkpoint(sim, args.save)
-    np.savez(args.out, **outcome(sim, cracks, contact))
+    result = outcome(sim, cracks, contact)
+    dev = sim._device
+    result["batches"] = np.array([dev.batches_run, dev.batches_refused] if dev is not None else [0, 0])
+    np.savez(args.out, **result)
     return 0
 
 
