@@ -448,7 +448,12 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
     use_density_scaling(sim, args.density_scaling)
     print(f"[{spacing_rule}] at strengths / {k_fail:.3f}: {len(geo.over_strength['shear'])} elements over shear "
           f"and {len(geo.over_strength['tensile'])} over tensile strength in the geostatic start")
-    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI)
+    # the events' stress drop is the mean tensile strength of the slope's sets (bridges and
+    # joints, / k), as RunReport's default would take it without the ground's full-strength
+    # sets: those would raise it 14-fold and shift every magnitude by -0.8
+    slope_sets = [p for t, p in cracks.property_sets.items() if t < GROUND_TAG_OFFSET]
+    report = RunReport(sim, toe_x=toe_x, floor_y=floor_y, reference_events=MULIASHI,
+                       stress_drop=float(np.mean([p.f_t for p in slope_sets])))
     recorder = MesoRecorder(interval=T / 4).attach(sim)  # before the history's first row
     journal = start_journal(sim, args, out)
     height = float(geometry.bounds[3] - geometry.bounds[1])
