@@ -90,20 +90,8 @@ def step_kernel(x, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_pres
         damped = alpha != 0.0 or local != 0.0
         s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt,
                           alpha, c_keep, c_div, local, damped, use_viscous, ledger)
-        # a heterogeneous tuple (12 floats and an int) takes constant indices only
-        shared[tid, 0] = s[0]
-        shared[tid, 1] = s[1]
-        shared[tid, 2] = s[2]
-        shared[tid, 3] = s[3]
-        shared[tid, 4] = s[4]
-        shared[tid, 5] = s[5]
-        shared[tid, 6] = s[6]
-        shared[tid, 7] = s[7]
-        shared[tid, 8] = s[8]
-        shared[tid, 9] = s[9]
-        shared[tid, 10] = s[10]
-        shared[tid, 11] = s[11]
-        shared[tid, 12] = s[12]
+        for k in range(N_STEP_SUMS):
+            shared[tid, k] = s[k]
     _reduce_block(shared, tid, N_STEP_SUMS, sums)
 
 

@@ -213,8 +213,8 @@ def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v
     the inertial masses and their inverses of a density-scaled stage, or is ``None`` (the
     triangle's lumped mass; gravity always acts on that). ``c_keep = 1 - alpha dt/2`` and
     ``c_div = 1 / (1 + alpha dt/2)``. Returns this triangle's share of the sums named in
-    :data:`LEDGER_FIELDS`, in that order (``n_inverted`` 0 or 1; the state energies are 0
-    unless ``ledger``).
+    :data:`LEDGER_FIELDS`, in that order, all floats (``n_inverted`` 0.0 or 1.0; the state
+    energies are 0 unless ``ledger``).
     """
     h = 0.5 * dt
     i = 3 * t
@@ -254,7 +254,7 @@ def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v
         v_l = h * velocity_gradient_power(tc, t, r[8], r[9], r[10], r[11], v[i, 0], v[i, 1],
                                           v[i + 1, 0], v[i + 1, 1], v[i + 2, 0], v[i + 2, 1])
     strain = r[6] if ledger else 0.0
-    bad = 0 if r[7] > 0.0 else 1
+    bad = 0.0 if r[7] > 0.0 else 1.0  # a float: the 13 sums are one tuple type, indexable by a variable
     return strain, kin, gmom, emom, d_e, d_l, v_e, v_l, r_e, r_l, i_e, i_l, bad
 
 
@@ -294,7 +294,7 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
         r_l = 0.0
         i_e = 0.0
         i_l = 0.0
-        n_bad = 0
+        n_bad = 0.0
         t_lo, t_hi = block_span(blk, n_tri, ranges)
         for t in range(t_lo, t_hi):
             s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy,

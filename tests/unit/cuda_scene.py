@@ -20,26 +20,10 @@ HISTORY_EVERY = 10
 
 
 def build(backend: str):
-    from fdem.mesh.mesh import structured_rectangle
-    from fdem.mesh.topology import build_topology
-    from fdem.physics.contact import ContactSet
-    from fdem.physics.crack_properties import CrackProperties
-    from fdem.physics.cracks import CrackSet
-    from fdem.physics.elastic import ElasticMaterial
-    from fdem.solve.model import Model
-    from fdem.solve.simulation import Simulation
+    """The checkpoint tests' scene (``test_checkpoint.scene``) on ``backend``."""
+    from test_checkpoint import scene
 
-    topo = build_topology(structured_rectangle(6, 6, 0.6, 0.6))
-    model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
-    model.set_gravity(0.0, -9.81)
-    model.fix("bottom")
-    model.set_initial_velocity(vx=3.0, vy=-1.5, where=np.flatnonzero(topo.x0[:, 1] > 0.35))
-    rock = CrackProperties(f_t=2e5, c=4e5, phi=30.0, G_I=5.0, G_II=20.0, p_n=1e10, name="rock")
-    cracks = CrackSet(topo, {0: rock}, contact_penalty=1e10, parallel_min=0)
-    contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
-    cracks.interfaces.set_reduction(1 / 0.8)
-    sim = Simulation(model, providers=[cracks, contact], progress=False, backend=backend)
-    return sim, cracks, contact
+    return scene(backend=backend)
 
 
 def outcome(sim, cracks, contact) -> dict[str, np.ndarray]:
@@ -92,5 +76,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    here = Path(__file__).resolve().parent
+    sys.path[:0] = [str(here.parents[1]), str(here)]
     sys.exit(main())

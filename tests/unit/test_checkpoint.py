@@ -27,7 +27,7 @@ HALF = 150
 EVERY = 10
 
 
-def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "colour"):
+def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "colour", backend: str | None = None):
     topo = build_topology(structured_rectangle(nx, 6, width, 0.6))
     model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
     model.set_gravity(0.0, -9.81)
@@ -38,7 +38,7 @@ def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "c
     contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
     if reduce:
         cracks.interfaces.set_reduction(1 / 0.8)
-    sim = Simulation(model, providers=[cracks, contact], progress=False)
+    sim = Simulation(model, providers=[cracks, contact], progress=False, backend=backend)
     return sim, cracks, contact
 
 
