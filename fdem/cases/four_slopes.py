@@ -4,7 +4,8 @@ Meshes a 15 m slope with its brick-pattern DFN, starts it in static equilibrium,
 strength of crack elements, joints and contact until it fails, and follows the failure and
 runout to rest (:mod:`fdem.workflow.slope`).
 
-Writes to ``--out``: the mesh (``.msh``, a PNG and a ``.vtu`` with crack elements as line cells),
+Writes to ``--out``: the mesh (``.msh``, and ``.npz`` for a GPU node without Gmsh: ``fdem run
+FILE.toml --mesh low_fine.npz`` with the scene of ``--write-scene``), a PNG and a ``.vtu`` with crack elements as line cells),
 ``slope.pvd`` and ``slope_cracks.pvd`` (open them in ParaView), ``history.csv`` (energy ledger
 and monitors per stage), ``summary.json`` (every stage and why it ended, the factor of safety
 when searched, runout distance and volume, displacement percentiles, kinetic energy, cracks by
@@ -304,6 +305,7 @@ def main(argv=None) -> dict:
     out = args.out
     name = f"{args.angle}_{args.spacing}"
     mesh.save(out / f"{name}.msh")
+    mesh.save(out / f"{name}.npz")  # the same mesh for a machine without Gmsh or meshio: --mesh on a scene
     vtu = write_mesh_vtu(topo, out / f"{name}_mesh.vtu")
     written = [vtu]
     if not args.no_pictures:

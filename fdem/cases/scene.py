@@ -42,7 +42,9 @@ def _parser():
                          size_help="element size [m] (default: the scene's [scene] size)")
     parser.add_argument("scene", type=Path, nargs="?", default=None, help="the scene file (.toml)")
     parser.add_argument("--mesh", type=Path, default=None,
-                        help="a Gmsh .msh with named physical groups, instead of the scene's [slope] and [[joints]]")
+                        help="a Gmsh .msh with named physical groups (or a mesh saved as .npz), instead of the "
+                             "scene's [slope] and [[joints]]; the toe and the joint groups joint_set_N come from "
+                             "what it replaces unless [mesh] gives them")
     parser.add_argument("--write-scene", type=Path, default=None, metavar="FILE",
                         help="write the checked scene, every default filled in, to FILE and stop")
     add_resume_options(parser)
@@ -68,15 +70,46 @@ def _read(parser, args) -> dict:
         parser.error(f"{path}: scene must be a table [scene]")
     if args.size is not None:
         raw.setdefault("scene", {})["size"] = args.size
-    if args.mesh is not None:
-        dropped = [s for s in ("slope", "joints") if raw.pop(s, None)]
-        if dropped:
-            say(f"--mesh {args.mesh} replaces the scene's " + " and ".join(f"[{d}]" for d in dropped))
-        raw.setdefault("scene", {})["mesh"] = str(args.mesh.resolve())
     try:
+        if args.mesh is not None:
+            _use_mesh(raw, args.mesh, path)
         return check_scene(raw, path)
     except SceneError as err:
         parser.error(str(err))
+
+
+def _use_mesh(raw: dict, mesh: Path, path: Path) -> None:
+    """``--mesh``: the mesh replaces ``[slope]`` and ``[[joints]]``. What the mesh cannot say
+    comes from what it replaces: the toe from the outline, and the mesh's joint groups
+    ``joint_set_1``, ``joint_set_2``, ... (the names of fdem's own meshes, ``Mesh.save``) as the
+    joint sets in their order, unless ``[mesh]`` gives them (a mesh without such groups needs
+    ``[mesh] joints``, and the check says so before any work). So a scene meshed on one machine
+    (``Mesh.save("slope.npz")``) runs on another with ``--mesh slope.npz`` and no Gmsh."""
+    from fdem.mesh.mesh import JOINT_GROUP_PREFIX, Mesh
+    from fdem.scene.objects import geometry
+    from fdem.scene.schema import check_scene
+    from fdem.geometry.polygons import slope_toe
+
+    mesh_keys = raw.setdefault("mesh", {})
+    if "slope" in raw and "toe" not in mesh_keys and "toe" not in raw.get("outputs", {}):
+        outline = check_scene({k: v for k, v in raw.items() if k != "mesh"}, path)
+        mesh_keys["toe"] = [float(c) for c in slope_toe(geometry(outline).bodies[0])]
+    if raw.get("joints") and "joints" not in mesh_keys:
+        try:  # cheap for .npz; a mesh that cannot be read is refused by the checks that follow
+            groups = set(Mesh.load(mesh).group_names)
+        except Exception:
+            groups = set()
+        found = {f"{JOINT_GROUP_PREFIX}{i}": i for i in range(1, len(raw["joints"]) + 1)
+                 if f"{JOINT_GROUP_PREFIX}{i}" in groups}
+        if found:
+            mesh_keys["joints"] = found
+    if not mesh_keys:
+        raw.pop("mesh")
+    dropped = [s for s in ("slope", "joints") if raw.pop(s, None)]
+    if dropped:
+        say(f"--mesh {mesh} replaces the scene's " + " and ".join(f"[{d}]" for d in dropped)
+            + (f" (toe {tuple(mesh_keys['toe'])} from the outline)" if "toe" in mesh_keys else ""))
+    raw.setdefault("scene", {})["mesh"] = str(mesh.resolve())
 
 
 def main(argv=None) -> dict:

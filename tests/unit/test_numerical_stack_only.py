@@ -6,6 +6,7 @@ importing any of them fails as if it were not installed) before importing ``fdem
 """
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -13,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fdem.geometry.polygons import slope_toe
 from fdem.mesh.mesh import Mesh, structured_rectangle
+from fdem.scene.objects import geometry
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSING = ("gmsh", "meshio", "pyvista", "vtk", "matplotlib", "dask", "distributed", "tqdm")
@@ -63,3 +66,33 @@ def test_a_saved_mesh_runs_without_gmsh_meshio_pyvista_or_dask(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.split() == ["ok", "50"]
     assert (tmp_path / "ck.npz").exists()
+
+
+def test_a_scene_meshed_elsewhere_runs_from_its_npz_without_gmsh(tmp_path):
+    """The GPU-node path of docs/gpu.md: the demo scene written as a file, meshed here and saved
+    as ``.npz``; ``fdem run scene.toml --mesh mesh.npz`` then runs in an interpreter where Gmsh
+    and meshio cannot be imported, the toe and the joint groups taken from what the mesh replaces."""
+    import tomllib
+
+    from fdem.cli import main
+    from fdem.scene.build import scene_mesh
+    from fdem.scene.schema import check_scene
+
+    scene_file = tmp_path / "demo.toml"
+    assert main(["run", "quick-start", "--size", "2.0", "--write-scene", str(scene_file)]) == 0
+    s = check_scene(tomllib.loads(scene_file.read_text()), scene_file)
+    _, mesh = scene_mesh(s)
+    mesh.save(tmp_path / "demo.npz")
+    script = textwrap.dedent(f"""
+        import sys
+        for name in {MISSING!r}:
+            sys.modules[name] = None
+        from fdem.cli import main
+        sys.exit(main(["run", "demo.toml", "--mesh", "demo.npz", "--max-time", "0.002", "--no-pictures",
+                       "--quiet", "--out", "run", "--threads", "1"]))
+        """)
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["n_triangles"] == mesh.n_triangles
+    assert summary["toe"] == [float(c) for c in slope_toe(geometry(s).bodies[0])]
