@@ -104,7 +104,8 @@ from numba import njit, prange
 
 __all__ = ["N_OUT", "N_WORK", "MAX_VERT", "N_COL", "N_HIST", "FASTMATH", "TOUCH_EPS", "CLOSE_TOL",
            "PARALLEL_MIN_PAIRS", "N_IWORK", "pair_normal", "tangential_law", "chunk_bounds", "pair_forces",
-           "overlap_areas", "gather_forces", "target_incidence", "carry_history"]
+           "overlap_areas", "gather_forces", "target_incidence", "carry_history", "lower_bound", "pair_constants_one",
+           "pair_constants", "carry_history_one"]
 
 
 N_OUT = 12
@@ -957,6 +958,87 @@ def gather_forces(f, active, inc_ptr, inc_pair, f_t, touching):
     else:
         for a in range(active.shape[0]):
             _gather_one(f, active[a], inc_ptr[a], inc_ptr[a + 1], inc_pair, f_t, touching)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def lower_bound(keys, key):
+    """First index ``r`` of sorted ``keys`` with ``keys[r] >= key`` (``len(keys)`` if none):
+    ``np.searchsorted(keys, key)``, written out so that the GPU can run it."""
+    lo = 0
+    hi = keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken,
+                       kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair):
+    """The constants of candidate pair ``q = (i, j)``, ``i < j``, written to row ``q``:
+
+    * ``mu_base``: the base (unreduced) Coulomb coefficient: the residual friction ``crack_mu``
+      of the broken crack element between ``i`` and ``j`` if there is one (``crack_keys``
+      sorted keys ``i * n_tri + j`` of the crack elements, ``crack_order`` their element ids),
+      else the lower face friction ``min(mu_tri[i], mu_tri[j])``;
+    * ``kt_pair``: the tangential stiffness ``min(kt_tri[i], kt_tri[j])`` [N/m per m];
+    * ``damp_pair``: ``2 xi sqrt(m_i m_j / (m_i + m_j))`` [sqrt(kg/m)] of the triangles'
+      masses, 0 without contact damping (``damping_ratio = 0``).
+    """
+    i = pair_i[q]
+    j = pair_j[q]
+    base = min(mu_tri[i], mu_tri[j])
+    if any_broken and crack_keys.shape[0] > 0:
+        key = i * n_tri + j
+        pos = min(lower_bound(crack_keys, key), crack_keys.shape[0] - 1)
+        if crack_keys[pos] == key:
+            c = crack_order[pos]
+            if broken[c]:
+                base = crack_mu[c]
+    mu_base[q] = base
+    kt_pair[q] = min(kt_tri[i], kt_tri[j])
+    if damping_ratio > 0.0:
+        mi = mass_tri[i]
+        mj = mass_tri[j]
+        damp_pair[q] = 2.0 * damping_ratio * math.sqrt(mi * mj / (mi + mj))
+    else:
+        damp_pair[q] = 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken, kt_tri,
+                   mass_tri, damping_ratio):
+    """``(mu_base, kt_pair, damp_pair)`` of every candidate pair (:func:`pair_constants_one`)."""
+    n = pair_i.shape[0]
+    mu_base = np.empty(n)
+    kt_pair = np.empty(n)
+    damp_pair = np.empty(n)
+    for q in range(n):
+        pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken,
+                           kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair)
+    return mu_base, kt_pair, damp_pair
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def carry_history_one(q, old_keys, old_hist, new_keys, new_hist, has_hist):
+    """Row ``q`` of :func:`carry_history` on its own (the GPU's, one thread a pair): the history
+    row of the old pair with the same key (bisection in the sorted ``old_keys``), else zeros."""
+    nc = new_hist.shape[1]
+    k = new_keys[q]
+    a = lower_bound(old_keys, k)
+    flag = 0
+    if a < old_keys.shape[0] and old_keys[a] == k:
+        for r in range(nc):
+            new_hist[q, r] = old_hist[a, r]
+            if old_hist[a, r] != 0.0:
+                flag = 1
+    else:
+        for r in range(nc):
+            new_hist[q, r] = 0.0
+    has_hist[q] = flag
 
 
 @njit(cache=True, error_model="numpy")

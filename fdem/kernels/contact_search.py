@@ -7,28 +7,54 @@ is its O(n^2) check. :func:`max_displacement` tells when the accumulated motion 
 buffer and the search must run again."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 from fdem.kernels.contact_pairs import PARALLEL_MIN_PAIRS, _corners, _max3
 
-__all__ = ["triangle_boxes", "brute_force_pairs", "grid_pairs", "fan_pairs", "triangle_moved2", "max_displacement"]
+__all__ = ["triangle_box", "triangle_boxes", "grid_shape", "box_cells", "brute_force_pairs", "grid_pairs", "fan_pairs", "triangle_moved2", "max_displacement"]
 
 
 # ----------------------------------------------------------------------------- broad phase
+@njit(cache=True, error_model="numpy", inline="always")
+def triangle_box(x, t, margin, box, a):
+    """Row ``a`` of ``box``: the axis-aligned box ``[xmin, ymin, xmax, ymax]`` of exploded
+    triangle ``t``, grown by ``margin`` [m] (the CPU's and the GPU's broad phase)."""
+    x0, x1, x2 = x[3 * t, 0], x[3 * t + 1, 0], x[3 * t + 2, 0]
+    y0, y1, y2 = x[3 * t, 1], x[3 * t + 1, 1], x[3 * t + 2, 1]
+    box[a, 0] = min(x0, min(x1, x2)) - margin
+    box[a, 1] = min(y0, min(y1, y2)) - margin
+    box[a, 2] = max(x0, max(x1, x2)) + margin
+    box[a, 3] = max(y0, max(y1, y2)) + margin
+
+
 @njit(cache=True, error_model="numpy")
 def triangle_boxes(x, active, margin):
     """(n_act, 4) axis-aligned boxes ``[xmin, ymin, xmax, ymax]`` of triangles, grown by ``margin``."""
     n = active.shape[0]
     box = np.empty((n, 4))
     for a in range(n):
-        t = active[a]
-        x0, x1, x2 = x[3 * t, 0], x[3 * t + 1, 0], x[3 * t + 2, 0]
-        y0, y1, y2 = x[3 * t, 1], x[3 * t + 1, 1], x[3 * t + 2, 1]
-        box[a, 0] = min(x0, min(x1, x2)) - margin
-        box[a, 1] = min(y0, min(y1, y2)) - margin
-        box[a, 2] = max(x0, max(x1, x2)) + margin
-        box[a, 3] = max(y0, max(y1, y2)) + margin
+        triangle_box(x, active[a], margin, box, a)
     return box
+
+
+@njit(cache=True, error_model="numpy")
+def grid_shape(x0, y0, x1, y1, cell, max_cells):
+    """``(cell, nx, ny)``: the binning grid over ``[x0, x1] x [y0, y1]`` with cells of side
+    ``cell`` [m], enlarged when that would make more than ``max_cells`` cells."""
+    w = max(x1 - x0, 1e-300)
+    h = max(y1 - y0, 1e-300)
+    if (w / cell + 1.0) * (h / cell + 1.0) > max_cells:
+        cell = max(cell, math.sqrt(w * h / max_cells), w / max_cells, h / max_cells) * 1.0001
+    return cell, int(w / cell) + 1, int(h / cell) + 1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def box_cells(box, a, x0, y0, cell):
+    """``(ix0, ix1, iy0, iy1)``: the grid cells box ``a`` covers (inclusive)."""
+    return (int((box[a, 0] - x0) / cell), int((box[a, 2] - x0) / cell),
+            int((box[a, 1] - y0) / cell), int((box[a, 3] - y0) / cell))
 
 
 @njit(cache=True, error_model="numpy")
@@ -131,18 +157,10 @@ def _grid_bin(box, cell, max_cells):
         y0 = min(y0, box[a, 1])
         x1 = max(x1, box[a, 2])
         y1 = max(y1, box[a, 3])
-    w = max(x1 - x0, 1e-300)
-    h = max(y1 - y0, 1e-300)
-    if (w / cell + 1.0) * (h / cell + 1.0) > max_cells:
-        cell = max(cell, np.sqrt(w * h / max_cells), w / max_cells, h / max_cells) * 1.0001
-    nx = int(w / cell) + 1
-    ny = int(h / cell) + 1
+    cell, nx, ny = grid_shape(x0, y0, x1, y1, cell, max_cells)
     cell_cnt = np.zeros(nx * ny + 1, np.int64)
     for a in range(n):
-        ix0 = int((box[a, 0] - x0) / cell)
-        ix1 = int((box[a, 2] - x0) / cell)
-        iy0 = int((box[a, 1] - y0) / cell)
-        iy1 = int((box[a, 3] - y0) / cell)
+        ix0, ix1, iy0, iy1 = box_cells(box, a, x0, y0, cell)
         for iy in range(iy0, iy1 + 1):
             for ix in range(ix0, ix1 + 1):
                 cell_cnt[iy * nx + ix + 1] += 1
@@ -152,10 +170,7 @@ def _grid_bin(box, cell, max_cells):
     cell_items = np.empty(cell_ptr[nx * ny], np.int64)
     fill = cell_cnt[:-1].copy()
     for a in range(n):
-        ix0 = int((box[a, 0] - x0) / cell)
-        ix1 = int((box[a, 2] - x0) / cell)
-        iy0 = int((box[a, 1] - y0) / cell)
-        iy1 = int((box[a, 3] - y0) / cell)
+        ix0, ix1, iy0, iy1 = box_cells(box, a, x0, y0, cell)
         for iy in range(iy0, iy1 + 1):
             for ix in range(ix0, ix1 + 1):
                 c = iy * nx + ix
@@ -168,10 +183,7 @@ def _grid_bin(box, cell, max_cells):
 def _query(a, box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, cell_items, outj, write):
     """Partners ``b`` of box ``a`` with ``active[b] > active[a]``: each pair is reported once, from
     the cell holding the lower-left corner of the two boxes' intersection. Returns the count."""
-    ix0 = int((box[a, 0] - x0) / cell)
-    ix1 = int((box[a, 2] - x0) / cell)
-    iy0 = int((box[a, 1] - y0) / cell)
-    iy1 = int((box[a, 3] - y0) / cell)
+    ix0, ix1, iy0, iy1 = box_cells(box, a, x0, y0, cell)
     ta = active[a]
     cnt = 0
     for iy in range(iy0, iy1 + 1):

@@ -36,7 +36,7 @@ from fdem.kernels.cracks import element_update
 from fdem.kernels.stepping import LEDGER_FIELDS, triangle_step
 
 __all__ = ["THREADS", "N_STEP_SUMS", "N_CONTACT_SUMS", "blocks_for", "step_kernel", "crack_kernel",
-           "contact_kernel", "gather_kernel", "moved_kernel", "zero_kernel"]
+           "contact_kernel", "gather_kernel", "moved_kernel", "divide_kernel", "zero_kernel"]
 
 THREADS = int(os.environ.get("FDEM_CUDA_THREADS", "128"))
 """Threads per block of every kernel: a power of two (the shared-memory reduction halves it)
@@ -166,6 +166,14 @@ def moved_kernel(x, x_ref, active, out):
     a = cuda.grid(1)
     if a < active.shape[0]:
         cuda.atomic.max(out, 0, triangle_moved2(x, x_ref, active[a]))
+
+
+@cuda.jit
+def divide_kernel(a, divisor, out):
+    """``out = a / divisor`` (1-D): the pairs' reduced friction, ``mu = mu_base / F``."""
+    i = cuda.grid(1)
+    if i < a.shape[0]:
+        out[i] = a[i] / divisor
 
 
 @cuda.jit

@@ -89,7 +89,7 @@ from fdem.kernels import contact_search as ks
 from fdem.mesh.topology import Topology
 from fdem.mesh.triangles import triangle_areas
 
-__all__ = ["pair_energy_force", "candidate_pairs", "brute_force_candidate_pairs", "INELASTIC_CHECK_EVERY",
+__all__ = ["pair_energy_force", "grid_cell_size", "candidate_pairs", "brute_force_candidate_pairs", "INELASTIC_CHECK_EVERY",
            "LOOSE_FRACTION", "SOFTENING_MODES", "ContactSet"]
 
 
@@ -121,6 +121,15 @@ def _bond_table(topology: Topology, intact: np.ndarray) -> np.ndarray:
     return bond
 
 
+def grid_cell_size(box: np.ndarray) -> float:
+    """The broad phase's cell side [m] for boxes ``box`` (n, 4): the 90th percentile of their
+    extents, about one box per cell for most boxes (the few large ones register in several)."""
+    if len(box) == 0:
+        return 1.0
+    ext = np.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])
+    return max(float(np.percentile(ext, 90)), 1e-12)
+
+
 def candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: float,
                     cell_size: float | None = None, max_cells_per_box: float = 4.0) -> np.ndarray:
     """(n_pairs, 2) candidate pairs ``i < j`` by the binned grid, sorted (see module docstring)."""
@@ -128,9 +137,7 @@ def candidate_pairs(x: np.ndarray, active: np.ndarray, bond: np.ndarray, skin: f
     active = np.ascontiguousarray(np.sort(np.asarray(active, dtype=np.int64)))
     box = ks.triangle_boxes(x, active, 0.5 * skin)
     if cell_size is None:
-        # about one box per cell for most boxes; the few large ones register in several cells
-        ext = np.maximum(box[:, 2] - box[:, 0], box[:, 3] - box[:, 1])
-        cell_size = max(float(np.percentile(ext, 90)), 1e-12) if len(box) else 1.0
+        cell_size = grid_cell_size(box)
     max_cells = max(1024.0, max_cells_per_box * len(active))
     pi, pj = ks.grid_pairs(box, active, bond, x, float(skin), float(cell_size), max_cells)
     return np.column_stack([pi, pj])
@@ -556,14 +563,17 @@ class ContactSet:
     def _pair_base_friction(self, pairs: np.ndarray, keys: np.ndarray) -> np.ndarray:
         """Base friction of each pair: the broken crack element between them, else the lower
         face friction of the two triangles."""
-        base = np.minimum(self.mu_tri[pairs[:, 0]], self.mu_tri[pairs[:, 1]])
-        if self._any_broken and len(keys) and len(self._crack_keys):
-            pos = np.minimum(np.searchsorted(self._crack_keys, keys), len(self._crack_keys) - 1)
-            hit = np.flatnonzero(self._crack_keys[pos] == keys)
-            crack = self._crack_order[pos[hit]]
-            across = self._broken[crack]
-            base[hit[across]] = self._crack_mu[crack[across]]
-        return base
+        return self._pair_constants(pairs)[0]
+
+    def _pair_constants(self, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(mu_base, kt_pair, damp_pair)`` of ``pairs`` (:func:`fdem.kernels.contact_pairs.pair_constants_one`,
+        the law the GPU search uses too)."""
+        pi = np.ascontiguousarray(pairs[:, 0], dtype=np.int64)
+        pj = np.ascontiguousarray(pairs[:, 1], dtype=np.int64)
+        mass = self.mass_tri if self.mass_tri is not None else np.zeros(0)
+        return kc.pair_constants(pi, pj, self.topology.n_triangles, self.mu_tri, self._crack_keys, self._crack_order,
+                                 self._broken, self._crack_mu, self._any_broken, self._kt_tri, mass,
+                                 self.damping_ratio)
 
     def _refresh_pair_friction(self) -> None:
         if len(self.pairs):
@@ -589,13 +599,8 @@ class ContactSet:
         touching = np.empty(len(pairs), np.uint8)
         kc.carry_history(self._keys, self._history, keys, history, touching)
         self.pairs, self._keys, self._history = pairs, keys, history
-        self._refresh_pair_friction()
-        self._kt_pair = np.minimum(self._kt_tri[pairs[:, 0]], self._kt_tri[pairs[:, 1]])
-        if self.damping_ratio > 0.0:
-            mi, mj = self.mass_tri[pairs[:, 0]], self.mass_tri[pairs[:, 1]]
-            self._damp_pair = 2.0 * self.damping_ratio * np.sqrt(mi * mj / (mi + mj))
-        else:
-            self._damp_pair = np.zeros(len(pairs))
+        self._mu_base_pair, self._kt_pair, self._damp_pair = self._pair_constants(pairs)
+        self._mu_pair = self._mu_base_pair / self.reduction
         self._pair_i = np.ascontiguousarray(pairs[:, 0])
         self._pair_j = np.ascontiguousarray(pairs[:, 1])
         self._bounds = kc.chunk_bounds(self._pair_i, min(1024, max(1, len(pairs) // 128)))
@@ -639,8 +644,11 @@ class ContactSet:
             return
         if self.device is not None:  # the same pair law on the GPU (fdem.solve.cuda_backend)
             if self.search_due(self.device.contact_moved):
-                self.device.pull_contact(self)  # the pairs' friction history, carried by the search
-                self.search(self.device.host_x())
+                if self.full_search:  # the grid search, on the device
+                    self.device.contact_search(self)
+                else:  # fan pairs: on the host, with the pairs' history carried
+                    self.device.pull_contact(self)
+                    self.search(self.device.host_x())
             if len(self.pairs) == 0:
                 self.book_pair_sums(0.0, 0.0, 0.0, 0.0)
             else:

@@ -116,9 +116,10 @@ class CudaBackend:
 
     def __init__(self, sim, max_batch: int = 64):
         self.cuda = require_cuda()
-        from fdem.kernels import cuda_step  # compiles nothing yet: kernels compile at first launch
+        from fdem.kernels import cuda_search, cuda_step  # compiles nothing yet: kernels compile at first launch
 
         self.k = cuda_step
+        self.ks = cuda_search
         if not sim.exploded:
             raise BackendError("backend 'cuda' steps exploded meshes only (every triangle owns its three "
                                "nodes, as the crack elements need); this model's mesh is conforming")
@@ -131,6 +132,7 @@ class CudaBackend:
         self.round_trips = 0  # synchronising copies so far (for the benchmarks)
         self.batches_run = 0  # speculative batches that stood, and those refused (try_batch)
         self.batches_refused = 0
+        self.device_searches = 0  # contact searches run on the device (the rest ran on the host)
         self._contact_in_batch = False
         self._kept_shapes = None
         self._kept: list = []
@@ -168,9 +170,16 @@ class CudaBackend:
             self._push_cracks(sim.cracks)
             sim.cracks.device = self
         if sim.contact is not None:
+            co = sim.contact
             self._pair_key = None
-            self._push_contact(sim.contact)
-            sim.contact.device = self
+            self._contact_stale = False  # the host's pair arrays are older than the device's
+            self._push_contact(co)
+            self.s_crack_keys = self._to(co._crack_keys if co._crack_keys.size else np.full(1, -1, np.int64))
+            self.s_crack_order = self._to(co._crack_order if co._crack_order.size else np.zeros(1, np.int64))
+            self.s_kt_tri = self._to(co._kt_tri)
+            self.s_mass_tri = self._to(co.mass_tri if co.mass_tri is not None else np.zeros(1))
+            self._cell_size = co.cell_size or self._grid_cell(co)  # fixed for the run
+            co.device = self
         self.attached = True
 
     def pull(self, state_only: bool = False) -> None:
@@ -280,6 +289,7 @@ class CudaBackend:
         self.p_j = self._to(co._pair_j if n_pairs else np.zeros(1, np.int64))
         one = np.zeros(1)
         self.p_mu = self._to(co._mu_pair if n_pairs else one)
+        self.p_mu_base = self._to(co._mu_base_pair if n_pairs else one)
         self.p_kt = self._to(co._kt_pair if n_pairs else one)
         self.p_damp = self._to(co._damp_pair if n_pairs else one)
         self.p_hist = self._to(co._history if n_pairs else np.zeros((1, co._history.shape[1])))
@@ -291,15 +301,139 @@ class CudaBackend:
         self.p_inc_ptr = self._to(co._inc_ptr)
         self.p_inc_pair = self._to(co._inc_pair if co._inc_pair.size else np.zeros(1, np.int64))
         self.p_x_search = self._to(co._x_search if co._x_search is not None else self.sim.state.x)
+        self.p_keys = self._to(co._keys if n_pairs else np.full(1, -1, np.int64))
         self._n_pairs = n_pairs
 
     def pull_contact(self, co) -> None:
-        """The pairs' history (friction springs, touching flags, separating axes) back to the host."""
+        """The pairs' history (friction springs, touching flags, separating axes) back to the host;
+        after a search on the device, the whole pair list with its constants."""
+        if self._contact_stale:
+            self._pull_pair_list(co)
+            return
         if self._pair_key is co.pairs and self._n_pairs:
             self.p_hist.copy_to_host(co._history)
             self.p_touch.copy_to_host(co._touching)
             self.p_witness.copy_to_host(co._witness)
             self.p_ft.copy_to_host(co._f_target)
+
+    def _pull_pair_list(self, co) -> None:
+        """The device's pair list (a search ran there) into the contact set's host arrays."""
+        from fdem.kernels import contact_pairs as kc
+
+        n = self._n_pairs
+        host = (lambda d: d.copy_to_host()[:n]) if n else (lambda d: d.copy_to_host()[:0])
+        pi, pj = host(self.p_i), host(self.p_j)
+        co.pairs = np.column_stack([pi, pj])
+        co._pair_i, co._pair_j = np.ascontiguousarray(pi), np.ascontiguousarray(pj)
+        co._keys = host(self.p_keys)
+        co._history = host(self.p_hist)
+        co._touching = host(self.p_touch)
+        co._witness = host(self.p_witness)
+        co._f_target = host(self.p_ft)
+        co._mu_base_pair = host(self.p_mu_base)
+        co._mu_pair = host(self.p_mu)
+        co._kt_pair = host(self.p_kt)
+        co._damp_pair = host(self.p_damp)
+        co._inc_ptr = self.p_inc_ptr.copy_to_host()
+        co._inc_pair = host(self.p_inc_pair) if n else np.zeros(0, np.int64)
+        co._bounds = kc.chunk_bounds(co._pair_i, min(1024, max(1, n // 128)))
+        co._x_search = self.p_x_search.copy_to_host()
+        self._pair_key = co.pairs
+        self._contact_stale = False
+        self.round_trips += 1
+
+    def _grid_cell(self, co) -> float:
+        """The grid's cell side [m] as the CPU search takes it (:func:`fdem.physics.contact.grid_cell_size`),
+        from the positions at the attach: the cell size changes the search's cost, not its pairs."""
+        from fdem.kernels.contact_search import triangle_boxes
+        from fdem.physics.contact import grid_cell_size
+
+        if co._active.size == 0:
+            return 1.0
+        return grid_cell_size(triangle_boxes(self.sim.state.x, co._active, 0.5 * co.skin))
+
+    def contact_search(self, co) -> None:
+        """:meth:`ContactSet.search` on the device (full grid search): the pair list, its carried
+        history and constants are made there; the host's copy is brought back when needed."""
+        from fdem.kernels.contact_search import grid_shape
+
+        cuda, ks, T = self.cuda, self.ks, self.k.THREADS
+        blocks = self.k.blocks_for
+        n_act = int(co._active.size)
+        n_tri = self.sim.model.n_triangles
+        active = self._to(co._active if n_act else np.zeros(1, np.int64))
+        bond = self._to(co._bond)
+        slot = self._to(co._slot)
+        mu_tri = self._to(co.mu_tri)
+        broken = self._to(co._broken.view(np.uint8))
+        crack_mu = self._to(co._crack_mu if co._crack_mu.size else np.zeros(1))
+        n_pairs = 0
+        if n_act >= 2:
+            box = cuda.device_array((n_act, 4), np.float64)
+            extent = self._to(np.full(4, np.inf))
+            ks.boxes_kernel[blocks(n_act), T](self.x, active, 0.5 * co.skin, box, extent)
+            e = extent.copy_to_host()
+            cell, nx, ny = grid_shape(e[0], e[1], -e[2], -e[3], self._cell_size, max(1024.0, 4.0 * n_act))
+            cell_cnt = self._to(np.zeros(nx * ny + 1, np.int64))
+            ks.bin_count_kernel[blocks(n_act), T](box, e[0], e[1], cell, nx, cell_cnt)
+            cell_ptr = np.cumsum(cell_cnt.copy_to_host())
+            d_ptr = self._to(cell_ptr)
+            items = cuda.device_array(max(1, int(cell_ptr[-1])), np.int64)
+            ks.bin_fill_kernel[blocks(n_act), T](box, e[0], e[1], cell, nx, d_ptr, self._to(np.zeros(nx * ny, np.int64)),
+                                                 items)
+            counts = self._to(np.zeros(n_act + 1, np.int64))
+            dummy = self._to(np.zeros(1, np.int64))
+            ks.partner_count_kernel[blocks(n_act), T](box, active, bond, self.x, co.skin, e[0], e[1], cell, nx, d_ptr,
+                                                      items, dummy, counts)
+            offsets = np.cumsum(counts.copy_to_host())
+            n_pairs = int(offsets[-1])
+            self.round_trips += 4
+        if n_pairs:
+            d_off = self._to(offsets)
+            pi = cuda.device_array(n_pairs, np.int64)
+            pj = cuda.device_array(n_pairs, np.int64)
+            ks.partner_fill_kernel[blocks(n_act), T](box, active, bond, self.x, co.skin, e[0], e[1], cell, nx, d_ptr,
+                                                     items, d_off, pi, pj)
+            keys = cuda.device_array(n_pairs, np.int64)
+            hist = cuda.device_array((n_pairs, co._history.shape[1]), np.float64)
+            touching = cuda.device_array(n_pairs, np.uint8)
+            mu_base = cuda.device_array(n_pairs, np.float64)
+            kt = cuda.device_array(n_pairs, np.float64)
+            damp = cuda.device_array(n_pairs, np.float64)
+            old_hist = self.p_hist if self._n_pairs else self._to(np.zeros((1, co._history.shape[1])))
+            ks.pair_kernel[blocks(n_pairs), T](pi, pj, n_tri, self.p_keys, old_hist, keys, hist, touching, mu_tri,
+                                               self.s_crack_keys, self.s_crack_order, broken, crack_mu,
+                                               bool(co._any_broken), self.s_kt_tri, self.s_mass_tri,
+                                               float(co.damping_ratio), mu_base, kt, damp)
+            inc_ptr = self._to(np.zeros(n_act + 1, np.int64))
+            ks.incidence_count_kernel[blocks(n_pairs), T](pj, slot, inc_ptr)
+            inc_ptr = self._to(np.cumsum(inc_ptr.copy_to_host()))
+            inc = cuda.device_array(n_pairs, np.int64)
+            ks.incidence_fill_kernel[blocks(n_pairs), T](pj, slot, inc_ptr, self._to(np.zeros(n_act, np.int64)), inc)
+            ks.incidence_sort_kernel[blocks(n_act), T](inc_ptr, inc)
+            self.round_trips += 1
+            self.p_i, self.p_j, self.p_keys, self.p_hist, self.p_touch = pi, pj, keys, hist, touching
+            self.p_mu_base, self.p_kt, self.p_damp = mu_base, kt, damp
+            self.p_mu = cuda.device_array(n_pairs, np.float64)
+            self.k.divide_kernel[blocks(n_pairs), T](mu_base, float(co.reduction), self.p_mu)
+            self.p_ft = self._to(np.zeros((n_pairs, 6)))
+            self.p_witness = self._to(np.zeros(n_pairs, np.uint8))
+            self.p_inc_ptr, self.p_inc_pair = inc_ptr, inc
+            self.p_starts = d_off
+            self._n_contactors = n_act
+        else:
+            self._n_contactors = 0
+            self.p_keys = self._to(np.full(1, -1, np.int64))
+            self.p_inc_ptr = self._to(np.zeros(n_act + 1, np.int64))
+        self.p_active = active
+        self._n_active = n_act
+        self._n_pairs = n_pairs
+        self.p_x_search = self.cuda.device_array_like(self.x)
+        self.p_x_search.copy_to_device(self.x)
+        self._contact_stale = True
+        co._needs_search = False
+        co.n_searches += 1
+        self.device_searches += 1
 
     def _launch_moved(self, row) -> None:
         co = self.sim.contact

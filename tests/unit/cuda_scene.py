@@ -37,6 +37,7 @@ def outcome(sim, cracks, contact) -> dict[str, np.ndarray]:
         "event_elements": cracks.events["element"] if len(cracks.events) else np.zeros(0, np.int64),
         "event_steps": cracks.events["step"] if len(cracks.events) else np.zeros(0, np.int64),
         "pairs": contact.pairs, "touching": contact._touching, "history": contact._history,
+        "searches": np.array(contact.n_searches),
         "energies": np.array([contact.energy_terms()[k] for k in sorted(contact.energy_terms())]),
         "ledger_keys": np.array(keys), "ledger": np.array([[r[k] for k in keys] for r in rows]),
         "ledger_steps": np.array([r["step"] for r in rows]),
@@ -71,6 +72,7 @@ def main(argv=None) -> int:
     result = outcome(sim, cracks, contact)
     dev = sim._device
     result["batches"] = np.array([dev.batches_run, dev.batches_refused] if dev is not None else [0, 0])
+    result["device_searches"] = np.array(dev.device_searches if dev is not None else 0)
     np.savez(args.out, **result)
     return 0
 

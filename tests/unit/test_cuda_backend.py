@@ -77,7 +77,7 @@ def runs(tmp_path_factory):
 def assert_same_run(a: dict, b: dict) -> None:
     """``a`` and ``b`` equal in every discrete outcome and to round-off in every number."""
     assert int(a["step"]) == int(b["step"])
-    for key in ("broken", "event_elements", "event_steps", "pairs", "touching", "ledger_keys"):
+    for key in ("broken", "event_elements", "event_steps", "pairs", "touching", "ledger_keys", "searches"):
         assert np.array_equal(a[key], b[key]), key
     assert np.abs(a["x"] - b["x"]).max() <= 1e-12                      # m
     assert np.abs(a["v"] - b["v"]).max() <= 1e-8                       # m/s
@@ -96,6 +96,7 @@ def assert_same_run(a: dict, b: dict) -> None:
 def test_gpu_resumes_a_cpu_checkpoint_and_breaks_the_same_elements(runs):
     gpu, ref = runs["gpu62"], runs["ref62"]
     assert ref["broken"].sum() >= 5 and ref["touching"].sum() > 0  # the window holds breaks and contact
+    assert gpu["device_searches"] >= 1  # grid searches made on the device give the CPU's pairs
     assert_same_run(gpu, ref)
 
 

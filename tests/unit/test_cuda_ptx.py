@@ -31,7 +31,24 @@ SIGNATURES = {
                        A2, A2, uint8[:], uint8[:], A2, float64[:]),
     "gather_kernel": (A2, int64[:], int64[:], int64[:], A2, uint8[:]),
     "moved_kernel": (A2, A2, int64[:], float64[:]),
+    "divide_kernel": (float64[:], float64, float64[:]),
     "zero_kernel": (A2,),
+}
+I2 = int64[:, :]
+SEARCH_SIGNATURES = {
+    "boxes_kernel": (A2, int64[:], float64, A2, float64[:]),
+    "bin_count_kernel": (A2, float64, float64, float64, int64, int64[:]),
+    "bin_fill_kernel": (A2, float64, float64, float64, int64, int64[:], int64[:], int64[:]),
+    "partner_count_kernel": (A2, int64[:], I2, A2, float64, float64, float64, float64, int64, int64[:], int64[:],
+                             int64[:], int64[:]),
+    "partner_fill_kernel": (A2, int64[:], I2, A2, float64, float64, float64, float64, int64, int64[:], int64[:],
+                            int64[:], int64[:], int64[:]),
+    "pair_kernel": (int64[:], int64[:], int64, int64[:], A2, int64[:], A2, uint8[:], float64[:], int64[:], int64[:],
+                    uint8[:], float64[:], boolean, float64[:], float64[:], float64, float64[:], float64[:],
+                    float64[:]),
+    "incidence_count_kernel": (int64[:], int64[:], int64[:]),
+    "incidence_fill_kernel": (int64[:], int64[:], int64[:], int64[:], int64[:]),
+    "incidence_sort_kernel": (int64[:], int64[:]),
 }
 
 
@@ -48,18 +65,18 @@ def kernels():
     real = dispatcher.get_current_device
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=(9, 0))
     try:
-        from fdem.kernels import cuda_step
+        from fdem.kernels import cuda_search, cuda_step
 
-        yield cuda_step
+        yield {**{n: getattr(cuda_step, n) for n in SIGNATURES}, **{n: getattr(cuda_search, n) for n in SEARCH_SIGNATURES}}
     finally:
         dispatcher.get_current_device = real
 
 
-@pytest.mark.parametrize("name", sorted(SIGNATURES))
+@pytest.mark.parametrize("name", sorted(SIGNATURES) + sorted(SEARCH_SIGNATURES))
 def test_kernel_compiles_for_sm90(kernels, name):
-    kernel = getattr(kernels, name)
+    kernel = kernels[name]
     try:
-        ptx, _ = cuda.compile_ptx(kernel.py_func, SIGNATURES[name], cc=(9, 0))
+        ptx, _ = cuda.compile_ptx(kernel.py_func, {**SIGNATURES, **SEARCH_SIGNATURES}[name], cc=(9, 0))
     except Exception as exc:
         if "nvrtc" in str(exc).lower() or "DynamicLibNotFound" in type(exc).__name__:
             pytest.skip(f"the CUDA compiler libraries are incomplete: {exc}")
@@ -68,6 +85,7 @@ def test_kernel_compiles_for_sm90(kernels, name):
 
 
 def test_signatures_cover_every_kernel():
-    from fdem.kernels import cuda_step
+    from fdem.kernels import cuda_search, cuda_step
 
     assert set(SIGNATURES) == {n for n in cuda_step.__all__ if n.endswith("_kernel")}
+    assert set(SEARCH_SIGNATURES) == {n for n in cuda_search.__all__ if n.endswith("_kernel")}
