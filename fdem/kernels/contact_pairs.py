@@ -105,7 +105,7 @@ from numba import njit, prange
 __all__ = ["N_OUT", "N_WORK", "MAX_VERT", "N_COL", "N_HIST", "FASTMATH", "TOUCH_EPS", "CLOSE_TOL",
            "PARALLEL_MIN_PAIRS", "N_IWORK", "pair_normal", "tangential_law", "chunk_bounds", "pair_forces",
            "overlap_areas", "gather_forces", "target_incidence", "carry_history", "lower_bound", "pair_constants_one",
-           "pair_constants", "carry_history_one"]
+           "pair_constants", "carry_row", "carry_history_one"]
 
 
 N_OUT = 12
@@ -1023,22 +1023,25 @@ def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broke
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def carry_row(q, a, old_hist, new_hist, has_hist):
+    """The history of new pair ``q``: row ``a`` of the old pairs' (the same pair before the
+    search), or zeros for a new pair (``a < 0``); ``has_hist[q] = 1`` where the row is nonzero."""
+    flag = 0
+    for r in range(new_hist.shape[1]):
+        h = old_hist[a, r] if a >= 0 else 0.0
+        new_hist[q, r] = h
+        if h != 0.0:
+            flag = 1
+    has_hist[q] = flag
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def carry_history_one(q, old_keys, old_hist, new_keys, new_hist, has_hist):
-    """Row ``q`` of :func:`carry_history` on its own (the GPU's, one thread a pair): the history
-    row of the old pair with the same key (bisection in the sorted ``old_keys``), else zeros."""
-    nc = new_hist.shape[1]
+    """:func:`carry_row` for pair ``q`` on its own (the GPU's loop, one thread a pair): the old
+    pair with the same key found by bisection in the sorted ``old_keys``."""
     k = new_keys[q]
     a = lower_bound(old_keys, k)
-    flag = 0
-    if a < old_keys.shape[0] and old_keys[a] == k:
-        for r in range(nc):
-            new_hist[q, r] = old_hist[a, r]
-            if old_hist[a, r] != 0.0:
-                flag = 1
-    else:
-        for r in range(nc):
-            new_hist[q, r] = 0.0
-    has_hist[q] = flag
+    carry_row(q, a if a < old_keys.shape[0] and old_keys[a] == k else -1, old_hist, new_hist, has_hist)
 
 
 @njit(cache=True, error_model="numpy")
@@ -1063,21 +1066,12 @@ def target_incidence(pair_j, slot_of_tri, n_active):
 @njit(cache=True, error_model="numpy")
 def carry_history(old_keys, old_hist, new_keys, new_hist, has_hist):
     """Copy the per-pair history rows of pairs that survive a re-search, zero the new ones
-    (both key lists sorted; one merge pass, O(n)); ``has_hist[q] = 1`` where the row is nonzero."""
+    (:func:`carry_row`; both key lists sorted: one merge pass, O(n)); ``has_hist[q] = 1`` where
+    the row is nonzero."""
     a = 0
     na = old_keys.shape[0]
-    nc = new_hist.shape[1]
     for q in range(new_keys.shape[0]):
         k = new_keys[q]
         while a < na and old_keys[a] < k:
             a += 1
-        flag = 0
-        if a < na and old_keys[a] == k:
-            for r in range(nc):
-                new_hist[q, r] = old_hist[a, r]
-                if old_hist[a, r] != 0.0:
-                    flag = 1
-        else:
-            for r in range(nc):
-                new_hist[q, r] = 0.0
-        has_hist[q] = flag
+        carry_row(q, a if a < na and old_keys[a] == k else -1, old_hist, new_hist, has_hist)
