@@ -39,11 +39,12 @@ __all__ = ["THREADS", "N_STEP_SUMS", "N_CONTACT_SUMS", "blocks_for", "step_kerne
            "contact_kernel", "gather_kernel", "moved_kernel", "divide_kernel", "zero_kernel"]
 
 THREADS = int(os.environ.get("FDEM_CUDA_THREADS", "128"))
-"""Threads per block of every kernel: a power of two (the shared-memory reduction halves it)
-and a multiple of the 32-thread warp. ``FDEM_CUDA_THREADS`` sets it at import (the simulator
+"""Threads per block of every kernel: a power of two (the shared-memory reduction halves it),
+a multiple of the 32-thread warp, at most 256 (the step's block sums take 104 bytes a thread of
+the 48 KiB of static shared memory). ``FDEM_CUDA_THREADS`` sets it at import (the simulator
 tests take 32: the simulator runs every thread as a Python thread)."""
-if THREADS < 32 or THREADS & (THREADS - 1):
-    raise ValueError(f"FDEM_CUDA_THREADS must be a power of two of at least 32, got {THREADS}")
+if THREADS not in (32, 64, 128, 256):  # 13 sums of 8 bytes a thread: 512 would pass 48 KiB of shared memory
+    raise ValueError(f"FDEM_CUDA_THREADS must be 32, 64, 128 or 256, got {THREADS}")
 N_STEP_SUMS = len(LEDGER_FIELDS)
 N_CONTACT_SUMS = 4  # E_normal, E_tangential, W_friction, W_damping
 

@@ -649,7 +649,7 @@ class ContactSet:
                 else:  # fan pairs: on the host, with the pairs' history carried
                     self.device.pull_contact(self)
                     self.search(self.device.host_x())
-            if len(self.pairs) == 0:
+            if self.device.n_pairs(self) == 0:  # the device's list: a search there leaves the host's behind
                 self.book_pair_sums(0.0, 0.0, 0.0, 0.0)
             else:
                 self.device.contact_forces(self, float(dt))  # books its sums when the step's come back

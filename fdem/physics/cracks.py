@@ -517,16 +517,22 @@ class CrackSet:
         call on, leave the active list and are recorded in :attr:`events` (a folded element's
         damage may stay below 1 at its intact end).
         """
-        if self._last_step is None:
-            self._time = step * dt
-        elif step != self._last_step:
-            self._time += (step - self._last_step) * dt
-        self._last_step = step
+        self.tick(step, dt)
         self._x_last = x
         carry, self._carry_broken = self._carry_broken, self._carry_broken[:0]
         self._add_forces(x, f, step)
         if carry.size:
             self.newly_broken = np.union1d(carry, self.newly_broken)
+
+    def tick(self, step: int, dt: float) -> None:
+        """Advance the events' clock to step ``step`` (time advances by ``dt`` [s] per step
+        number since the last call): every :meth:`add_forces` does it, and the GPU backend for
+        each step of a batch that needed no crack work on the host."""
+        if self._last_step is None:
+            self._time = step * dt
+        elif step != self._last_step:
+            self._time += (step - self._last_step) * dt
+        self._last_step = step
 
     def _add_forces(self, x: np.ndarray, f: np.ndarray, step: int) -> None:
         if self._run.size == 0:

@@ -133,6 +133,7 @@ class CudaBackend:
         self.batches_run = 0  # speculative batches that stood, and those refused (try_batch)
         self.batches_refused = 0
         self.device_searches = 0  # contact searches run on the device (the rest ran on the host)
+        self.in_batch = False  # inside try_batch: the device's state is not that of any step yet
         self._contact_in_batch = False
         self._kept_shapes = None
         self._kept: list = []
@@ -178,7 +179,8 @@ class CudaBackend:
             self.s_crack_order = self._to(co._crack_order if co._crack_order.size else np.zeros(1, np.int64))
             self.s_kt_tri = self._to(co._kt_tri)
             self.s_mass_tri = self._to(co.mass_tri if co.mass_tri is not None else np.zeros(1))
-            self._cell_size = co.cell_size or self._grid_cell(co)  # fixed for the run
+            # the grid's cell: the contact set's, else taken from the boxes of the first device search
+            self._cell_size = co.cell_size or getattr(self, "_cell_size", None)
             co.device = self
         self.attached = True
 
@@ -342,16 +344,6 @@ class CudaBackend:
         self._contact_stale = False
         self.round_trips += 1
 
-    def _grid_cell(self, co) -> float:
-        """The grid's cell side [m] as the CPU search takes it (:func:`fdem.physics.contact.grid_cell_size`),
-        from the positions at the attach: the cell size changes the search's cost, not its pairs."""
-        from fdem.kernels.contact_search import triangle_boxes
-        from fdem.physics.contact import grid_cell_size
-
-        if co._active.size == 0:
-            return 1.0
-        return grid_cell_size(triangle_boxes(self.sim.state.x, co._active, 0.5 * co.skin))
-
     def contact_search(self, co) -> None:
         """:meth:`ContactSet.search` on the device (full grid search): the pair list, its carried
         history and constants are made there; the host's copy is brought back when needed."""
@@ -373,6 +365,10 @@ class CudaBackend:
             extent = self._to(np.full(4, np.inf))
             ks.boxes_kernel[blocks(n_act), T](self.x, active, 0.5 * co.skin, box, extent)
             e = extent.copy_to_host()
+            if self._cell_size is None:  # as the CPU takes it; it changes the search's cost, not its pairs
+                from fdem.physics.contact import grid_cell_size
+
+                self._cell_size = grid_cell_size(box.copy_to_host())
             cell, nx, ny = grid_shape(e[0], e[1], -e[2], -e[3], self._cell_size, max(1024.0, 4.0 * n_act))
             cell_cnt = self._to(np.zeros(nx * ny + 1, np.int64))
             ks.bin_count_kernel[blocks(n_act), T](box, e[0], e[1], cell, nx, cell_cnt)
@@ -431,6 +427,10 @@ class CudaBackend:
         self.p_x_search = self.cuda.device_array_like(self.x)
         self.p_x_search.copy_to_device(self.x)
         self._contact_stale = True
+        # the search positions live on the device (p_x_search) and come back with the pair list;
+        # the host's must only stop saying "never searched"
+        if co._x_search is None:
+            co._x_search = self.sim.state.x
         co._needs_search = False
         co.n_searches += 1
         self.device_searches += 1
@@ -442,6 +442,10 @@ class CudaBackend:
         k = self.k
         k.moved_kernel[k.blocks_for(self._n_active), k.THREADS](self.x, self.p_x_search, self.p_active,
                                                                row[_MOVED:_MOVED + 1])
+
+    def n_pairs(self, co) -> int:
+        """Candidate pairs of ``co`` now: the device's count after a search there, else the host's."""
+        return self._n_pairs if self._contact_stale or self._pair_key is co.pairs else len(co.pairs)
 
     def contact_moved(self) -> float:
         """Largest displacement of an active contact node since the last search [m] (this step's
@@ -537,10 +541,12 @@ class CudaBackend:
         cs, co = sim.cracks, sim.contact
         if cs is not None and (cs._carry_broken.size or cs._run is not self._run_host):
             return False
-        if co is not None and not co.dormant:
-            if co._needs_search or co._x_search is None or self._pair_key is not co.pairs:
-                return False
+        if co is not None:
+            # elements under contact's watch have their gaps checked on the host every few steps,
+            # dormant or not (that check loosens the first vertices)
             if co.cracks is not None and co.softening != "all" and (co._watch is None or co._watch.size):
+                return False
+            if not co.dormant and (co._needs_search or co._x_search is None or self._pair_key is not co.pairs):
                 return False
         return True
 
@@ -579,13 +585,21 @@ class CudaBackend:
             return None
         if not self._batchable():
             return None
+        self.in_batch = True
+        try:
+            return self._run_batch(damping, n_steps)
+        finally:
+            self.in_batch = False
+
+    def _run_batch(self, damping, n_steps: int) -> np.ndarray | None:
+        sim = self.sim
         kept = self._kept_copies()
         for dst, src in zip(kept, self._state_arrays()):
             dst.copy_to_device(src)
         rows = self.cuda.to_device(np.zeros((n_steps, _SCALARS)))
         use_int = bool(sim.providers)
         cs, co = sim.cracks, sim.contact
-        contact_on = co is not None and not co.dormant and len(co.pairs) > 0
+        contact_on = co is not None and not co.dormant and self.n_pairs(co) > 0
         for j in range(n_steps):
             row = rows[j]
             if use_int:
@@ -613,9 +627,14 @@ class CudaBackend:
         return host
 
     def book_row(self, row: np.ndarray) -> StepSums:
-        """One step of a batch that stood: its contact sums booked, its step sums returned."""
+        """One step of a batch that stood (before the simulation's clock moves on): the crack set's
+        clock, its contact sums booked; its step sums returned."""
+        sim = self.sim
+        if sim.cracks is not None:  # what the crack set's host code does in a step without breaks
+            sim.cracks.tick(sim.state.step, sim.dt)
+            sim.cracks.newly_broken = np.zeros(0, dtype=np.int64)
         if self._contact_in_batch:
-            self.sim.contact.book_pair_sums(*(float(e) for e in row[_CONTACT]))
+            sim.contact.book_pair_sums(*(float(e) for e in row[_CONTACT]))
         sums = row[_STEP]
         return StepSums(*(float(e) for e in sums[:12]), int(round(sums[12])))
 

@@ -689,10 +689,11 @@ class Simulation:
             bar = tqdm(total=n_steps, desc=self._stage, unit="step", mininterval=0.5)
         bar_chunk = 0
         STOP.running += 1
-        if self._device is not None:
+        attached_here = self._device is not None and not self._device.attached
+        if attached_here:
             self._device.attach()
+        queued: list = []  # rows of a GPU batch that stood, booked one step at a time
         try:
-            queued: list = []  # rows of a GPU batch that stood, booked one step at a time
             for k in range(phase, phase + n_steps):
                 is_ledger = (k % history_every == 0) or k == phase + n_steps - 1
                 step_before, time_before = self.state.step, self.state.time
@@ -713,8 +714,11 @@ class Simulation:
                         self._fail(step_before, time_before, "energy growing without work "
                                    f"(balance error {row['balance_error']:.3g} J/m, "
                                    f"{100 * row['balance_error_relative']:.2g} % of the energy scale)", None)
-                    if stop_when is not None and stop_when(self):
-                        break
+                    if stop_when is not None:
+                        if stop_when(self):
+                            break
+                        if self._device is not None:  # what a stop rule changed (a strength ramp) goes out
+                            self._device.attach()
                 if (k + 1) % checkpoint_every == 0:
                     self.sync_host(state_only=True)
                     self._good = self.state.copy()
@@ -730,12 +734,14 @@ class Simulation:
             if final_output:
                 self.write_output()
         except KeyboardInterrupt:
-            if not STOP.forced:  # a whole step: worth keeping
+            # a whole step is worth keeping; a GPU batch in flight or half booked is no step's state
+            mid_batch = queued or (self._device is not None and self._device.in_batch)
+            if not STOP.forced and not mid_batch:
                 self._write_interrupted()
             raise
         finally:
             STOP.running -= 1
-            if self._device is not None:
+            if attached_here:
                 self._device.detach()
             if bar is not None:
                 bar.update(bar_chunk)

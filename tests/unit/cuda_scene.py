@@ -19,11 +19,11 @@ STEPS = 120       # steps of the comparison (the first breaks come at step 51)
 HISTORY_EVERY = 10
 
 
-def build(backend: str):
+def build(backend: str, softening: str = "vertex"):
     """The checkpoint tests' scene (``test_checkpoint.scene``) on ``backend``."""
     from test_checkpoint import scene
 
-    return scene(backend=backend)
+    return scene(backend=backend, softening=softening)
 
 
 def outcome(sim, cracks, contact) -> dict[str, np.ndarray]:
@@ -37,7 +37,7 @@ def outcome(sim, cracks, contact) -> dict[str, np.ndarray]:
         "event_elements": cracks.events["element"] if len(cracks.events) else np.zeros(0, np.int64),
         "event_steps": cracks.events["step"] if len(cracks.events) else np.zeros(0, np.int64),
         "pairs": contact.pairs, "touching": contact._touching, "history": contact._history,
-        "searches": np.array(contact.n_searches),
+        "searches": np.array(contact.n_searches), "reduction": np.array(cracks.interfaces.reduction),
         "energies": np.array([contact.energy_terms()[k] for k in sorted(contact.energy_terms())]),
         "ledger_keys": np.array(keys), "ledger": np.array([[r[k] for k in keys] for r in rows]),
         "ledger_steps": np.array([r["step"] for r in rows]),
@@ -53,11 +53,17 @@ def main(argv=None) -> int:
     ap.add_argument("--save", default=None, help="write a checkpoint after the last step")
     ap.add_argument("--quasi-static", action="store_true",
                     help="a quasi-static stage: density-scaled masses, mass-proportional and local damping")
+    ap.add_argument("--softening", default="vertex", help="the contact set's softening rule (vertex or all)")
+    ap.add_argument("--ramp", type=float, default=None, metavar="F",
+                    help="a stop rule that sets the strength reduction to F at the first history row after "
+                         "step 40, during the run (as the paper's reduction rate does)")
+    ap.add_argument("--bare", type=int, default=0, metavar="N",
+                    help="N bare Simulation.step calls before the run, all inside one device_session")
     args = ap.parse_args(argv)
     from fdem.solve import checkpoint as ck
     from fdem.solve.damping import Damping
 
-    sim, cracks, contact = build(args.backend)
+    sim, cracks, contact = build(args.backend, args.softening)
     if args.start:
         ck.load_checkpoint(sim, args.start)
     done = sim.state.step
@@ -65,8 +71,17 @@ def main(argv=None) -> int:
     if args.quasi_static:
         sim.set_density_scaling(True)
         damping = Damping(mass_proportional=200.0, local=0.3)
-    sim.run(n_steps=args.steps - done, phase=done, history_every=HISTORY_EVERY, energy_tolerance=None,
-            stage="shear", damping=damping)
+    def ramp(s) -> bool:
+        if args.ramp is not None and s.state.step > 40 and cracks.interfaces.reduction != args.ramp:
+            cracks.interfaces.set_reduction(args.ramp)
+        return False
+
+    with sim.device_session():
+        for _ in range(args.bare):
+            sim.step(damping or Damping())
+        done = sim.state.step
+        sim.run(n_steps=args.steps - done, phase=done, history_every=HISTORY_EVERY, energy_tolerance=None,
+                stage="shear", damping=damping, stop_when=ramp if args.ramp is not None else None)
     if args.save:
         ck.save_checkpoint(sim, args.save)
     result = outcome(sim, cracks, contact)

@@ -27,7 +27,8 @@ HALF = 150
 EVERY = 10
 
 
-def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "colour", backend: str | None = None):
+def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "colour", backend: str | None = None,
+          softening: str = "vertex"):
     topo = build_topology(structured_rectangle(nx, 6, width, 0.6))
     model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
     model.set_gravity(0.0, -9.81)
@@ -35,7 +36,7 @@ def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "c
     model.set_initial_velocity(vx=3.0, vy=-1.5, where=np.flatnonzero(topo.x0[:, 1] > 0.35))
     rock = CrackProperties(f_t=2e5, c=4e5, phi=30.0, G_I=5.0, G_II=20.0, p_n=1e10, name="rock")
     cracks = CrackSet(topo, {0: rock}, contact_penalty=1e10, scheme=scheme, parallel_min=0)
-    contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
+    contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks, softening=softening)
     if reduce:
         cracks.interfaces.set_reduction(1 / 0.8)
     sim = Simulation(model, providers=[cracks, contact], progress=False, backend=backend)

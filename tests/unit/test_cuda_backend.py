@@ -8,8 +8,10 @@ Numba. Both sides are checkpointed and resumed by the other backend:
 
 * CPU steps 0-50, checkpoint; GPU resumes it to step 62 (the first twelve breaks, contact
   activation, searches), checkpoint; CPU resumes that to step 70;
-* GPU from step 0 to 24 (the attach at the start, the first search, speculative batches that
-  stand and batches refused and replayed);
+* GPU from step 0 to 24 with contact watching every softened element (the attach at the start,
+  the first grid search, speculative batches that stand and batches refused and replayed);
+* a stop rule that raises the strength reduction inside the run (the paper's reduction rate),
+  GPU from the CPU's step-50 checkpoint to step 58;
 * a quasi-static stage (density-scaled masses, mass-proportional and local damping), GPU from
   the CPU's step-50 checkpoint to step 56.
 
@@ -62,15 +64,20 @@ def _cpu(*args) -> None:
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cuda")
     f = {name: tmp / f"{name}.npz" for name in ("ck50", "ck62g", "ref24", "ref62", "ref70", "gpu24", "gpu62",
-                                                 "cpu70", "cpu50", "qs56", "gqs56")}
+                                                 "cpu70", "cpu50", "qs56", "gqs56", "ramp58", "gramp58", "bare", "gbare")}
     _cpu(f["cpu50"], "--steps", CHECKPOINT, "--save", f["ck50"])
     _gpu(f["gpu62"], "--steps", GPU_END, "--from", f["ck50"], "--save", f["ck62g"], tmp=tmp)
     _cpu(f["cpu70"], "--steps", CPU_END, "--from", f["ck62g"])
-    _gpu(f["gpu24"], "--steps", 24, tmp=tmp)
+    _gpu(f["gpu24"], "--steps", 24, "--softening", "all", tmp=tmp)
+    _gpu(f["gramp58"], "--steps", 58, "--from", f["ck50"], "--ramp", 1.6, tmp=tmp)
+    _cpu(f["ramp58"], "--steps", 58, "--from", f["ck50"], "--ramp", 1.6)
+    _gpu(f["gbare"], "--steps", 8, "--bare", 3, tmp=tmp)
+    _cpu(f["bare"], "--steps", 8, "--bare", 3)
     _gpu(f["gqs56"], "--steps", 56, "--from", f["ck50"], "--quasi-static", tmp=tmp)
     _cpu(f["qs56"], "--steps", 56, "--from", f["ck50"], "--quasi-static")
-    for name, steps in (("ref24", 24), ("ref62", GPU_END), ("ref70", CPU_END)):
+    for name, steps in (("ref62", GPU_END), ("ref70", CPU_END)):
         _cpu(f[name], "--steps", steps)
+    _cpu(f["ref24"], "--steps", 24, "--softening", "all")
     return {name: dict(np.load(path)) for name, path in f.items() if not name.startswith("ck")}
 
 
@@ -105,12 +112,22 @@ def test_cpu_resumes_a_gpu_checkpoint(runs):
 
 
 def test_gpu_from_the_start_with_speculative_batches(runs):
-    """From the start: the attach, the first search, and batches of plain steps that stand
-    (one round trip for several steps) and batches refused and replayed step by step (elements
-    leaving the elastic range while the block is thrown)."""
-    ran, refused = runs["gpu24"]["batches"]
+    """From the start, contact watching every softened element (``softening="all"``): the
+    attach, the first grid search on the device (step 16, while the host still holds no pair),
+    and batches of plain steps that stand (one round trip for several steps) and batches refused
+    and replayed step by step (elements leaving the elastic range while the block is thrown)."""
+    gpu = runs["gpu24"]
+    ran, refused = gpu["batches"]
     assert ran >= 1 and refused >= 1
-    assert_same_run(runs["gpu24"], runs["ref24"])
+    assert gpu["device_searches"] >= 1 and len(gpu["pairs"]) > 0
+    assert_same_run(gpu, runs["ref24"])
+
+
+def test_a_stop_rule_that_changes_the_strength_mid_run_reaches_the_gpu(runs):
+    """The paper's reduction rate changes the strength from the stage's stop rule, inside a run:
+    the change must reach the device at once (here F = 1.25 -> 1.6 at the step-50 row)."""
+    assert float(runs["gramp58"]["reduction"]) == float(runs["ramp58"]["reduction"]) == 1.6
+    assert_same_run(runs["gramp58"], runs["ramp58"])
 
 
 def test_gpu_quasi_static_stage(runs):
@@ -132,6 +149,12 @@ def test_real_gpu_matches_cpu(runs, tmp_path):
     _cpu(tmp_path / "cpu50.npz", "--steps", CHECKPOINT, "--save", ck)
     _gpu(tmp_path / "dev62.npz", "--steps", GPU_END, "--from", ck, tmp=tmp_path, simulator=False)
     assert_same_run(dict(np.load(tmp_path / "dev62.npz")), runs["ref62"])
+
+
+def test_bare_steps_then_a_run_in_one_device_session(runs):
+    """Bare steps leave the state on the device; a run inside the same session goes on from
+    there (it neither uploads the host's older copy nor ends the session)."""
+    assert_same_run(runs["gbare"], runs["bare"])
 
 
 def test_unknown_backend_is_named():
