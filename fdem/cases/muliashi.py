@@ -7,7 +7,8 @@ dynamics) and the critical factor is found by the factor-of-safety search
 (:class:`fdem.workflow.fos.GravityIncrease`). The slide then runs on the same slope at 1 g with
 its strengths divided by the smallest failing factor ``k`` and its fracture energies by ``k^2``
 (:func:`property_sets`, ``strength_factor``: the same failure onset as at ``k g``, then real
-gravity), from a damped onset to rest; the meso views (:func:`meso_views`) read it.
+gravity; the ground below the toe's elevation, which takes no part in that failure, at full
+strength: :func:`build`), from a damped onset to rest; the meso views (:func:`meso_views`) read it.
 
 Crack-element properties (every choice is a keyword of :func:`property_sets`):
 
@@ -495,7 +496,8 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 def main(argv=None) -> dict:
     # defaults: the run of docs/cases.md B. At 0.6 m the slope weakened by its failing factor
     # settles instead of sliding (the search loads from the 1 g state, the slide model starts
-    # from a geostatic state at the reduced strength), so the default size is 1.0 m; the
+    # from a geostatic state at the reduced strength; it slides at --gravity-factor 24.4,
+    # 1.25 times the factor, docs/cases.md B), so the default size is 1.0 m; the
     # critical factor is about 20 (pitch) and 39 (gap), so the bracket reaches 80.
     parser = case_parser(__doc__, "runs/muliashi", 1.0, "element size [m] (default 1.0)", name=NAME)
     parser.add_argument("--spacing-rule", choices=["pitch", "gap", "both"], default="pitch",
