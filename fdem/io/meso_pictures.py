@@ -40,6 +40,17 @@ def _lines(ax, segments, **kw):
     return lc
 
 
+def _slope_axes(x, triangles, joints):
+    """A figure with the slope's mesh and, when given, its joints (m, 4) [m] drawn thin black:
+    the background of the maps below."""
+    fig = new_figure((9.0, 6.5))
+    ax = fig.add_subplot(111)
+    _mesh(ax, x, triangles)
+    if joints is not None and len(joints):
+        _lines(ax, joints, colors="k", linewidths=0.6)
+    return fig, ax
+
+
 def initiation_map(path: str | os.PathLike | None, x, triangles, segments, rank, time=None, joints=None,
                    title: str = "", dpi: int = 130):
     """The first breakages as segments (k, 4) [m] coloured by their order ``rank`` (0 = first);
@@ -49,11 +60,7 @@ def initiation_map(path: str | os.PathLike | None, x, triangles, segments, rank,
     segs = np.asarray(segments, dtype=float).reshape(-1, 4)
     if segs.shape[0] != rank.size:
         raise ValueError(f"initiation_map: {segs.shape[0]} segments for {rank.size} ranks")
-    fig = new_figure((9.0, 6.5))
-    ax = fig.add_subplot(111)
-    _mesh(ax, x, triangles)
-    if joints is not None and len(joints):
-        _lines(ax, joints, colors="k", linewidths=0.6)
+    fig, ax = _slope_axes(x, triangles, joints)
     if rank.size:
         lc = _lines(ax, segs, array=rank, cmap="plasma_r", linewidths=2.2)
         cb = fig.colorbar(lc, ax=ax, shrink=0.8)
@@ -74,11 +81,7 @@ def event_map(path: str | os.PathLike | None, x, triangles, ex, ey, magnitude, t
     """Events at ``(ex, ey)`` [m], circle area growing with magnitude (smallest 8 pt^2, largest
     300 pt^2, linear in Mw), coloured by time [s] when ``t`` is given."""
     mag = np.asarray(magnitude, dtype=float)
-    fig = new_figure((9.0, 6.5))
-    ax = fig.add_subplot(111)
-    _mesh(ax, x, triangles)
-    if joints is not None and len(joints):
-        _lines(ax, joints, colors="k", linewidths=0.6)
+    fig, ax = _slope_axes(x, triangles, joints)
     if mag.size:
         lo, hi = float(mag.min()), float(mag.max())
         size = 8.0 + 292.0 * ((mag - lo) / (hi - lo) if hi > lo else np.full(mag.size, 0.5))

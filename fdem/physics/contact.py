@@ -560,11 +560,6 @@ class ContactSet:
         through ``interfaces.set_reduction(F)`` (shared with the crack elements)."""
         return self.interfaces.reduction
 
-    def _pair_base_friction(self, pairs: np.ndarray, keys: np.ndarray) -> np.ndarray:
-        """Base friction of each pair: the broken crack element between them, else the lower
-        face friction of the two triangles."""
-        return self._pair_constants(pairs)[0]
-
     def _pair_constants(self, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(mu_base, kt_pair, damp_pair)`` of ``pairs`` (:func:`fdem.kernels.contact_pairs.pair_constants_one`,
         the law the GPU search uses too)."""
@@ -577,7 +572,7 @@ class ContactSet:
 
     def _refresh_pair_friction(self) -> None:
         if len(self.pairs):
-            self._mu_base_pair = self._pair_base_friction(self.pairs, self._keys)
+            self._mu_base_pair = self._pair_constants(self.pairs)[0]
         else:
             self._mu_base_pair = np.zeros(0)
         self._mu_pair = self._mu_base_pair / self.reduction
