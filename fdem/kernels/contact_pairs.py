@@ -105,7 +105,7 @@ from numba import njit, prange
 __all__ = ["N_OUT", "N_WORK", "MAX_VERT", "N_COL", "N_HIST", "FASTMATH", "TOUCH_EPS", "CLOSE_TOL",
            "PARALLEL_MIN_PAIRS", "N_IWORK", "pair_normal", "tangential_law", "chunk_bounds", "pair_forces",
            "overlap_areas", "gather_forces", "target_incidence", "carry_history", "lower_bound", "pair_constants_one",
-           "pair_constants", "carry_row", "carry_history_one"]
+           "pair_constants", "crack_friction", "crack_between", "carry_row", "carry_history_one"]
 
 
 N_OUT = 12
@@ -976,29 +976,20 @@ def lower_bound(keys, key):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken,
-                       kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair):
-    """The constants of candidate pair ``q = (i, j)``, ``i < j``, written to row ``q``:
+def pair_constants_one(q, pair_i, pair_j, crack, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio, mu_base,
+                       kt_pair, damp_pair):
+    """The constants of candidate pair ``q = (i, j)``, written to row ``q``; ``crack`` is the
+    crack element between ``i`` and ``j``, or -1 (:func:`crack_between`):
 
     * ``mu_base``: the base (unreduced) Coulomb coefficient: the residual friction ``crack_mu``
-      of the broken crack element between ``i`` and ``j`` if there is one (``crack_keys``
-      sorted keys ``i * n_tri + j`` of the crack elements, ``crack_order`` their element ids),
-      else the lower face friction ``min(mu_tri[i], mu_tri[j])``;
+      of that crack element if it is broken, else the lower face friction ``min(mu_tri[i], mu_tri[j])``;
     * ``kt_pair``: the tangential stiffness ``min(kt_tri[i], kt_tri[j])`` [N/m per m];
     * ``damp_pair``: ``2 xi sqrt(m_i m_j / (m_i + m_j))`` [sqrt(kg/m)] of the triangles'
       masses, 0 without contact damping (``damping_ratio = 0``).
     """
     i = pair_i[q]
     j = pair_j[q]
-    base = min(mu_tri[i], mu_tri[j])
-    if any_broken and crack_keys.shape[0] > 0:
-        key = i * n_tri + j
-        pos = min(lower_bound(crack_keys, key), crack_keys.shape[0] - 1)
-        if crack_keys[pos] == key:
-            c = crack_order[pos]
-            if broken[c]:
-                base = crack_mu[c]
-    mu_base[q] = base
+    mu_base[q] = crack_friction(crack, broken, crack_mu, min(mu_tri[i], mu_tri[j]))
     kt_pair[q] = min(kt_tri[i], kt_tri[j])
     if damping_ratio > 0.0:
         mi = mass_tri[i]
@@ -1008,17 +999,64 @@ def pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order
         damp_pair[q] = 0.0
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def crack_friction(crack, broken, crack_mu, face):
+    """The base friction of a pair: ``crack_mu[crack]`` when crack element ``crack`` between the
+    two triangles is broken, else ``face``, the lower face friction (``crack = -1``: none)."""
+    if crack >= 0 and broken[crack]:
+        return crack_mu[crack]
+    return face
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def crack_between(key, crack_keys, crack_order, start):
+    """``(crack, r)``: the crack element whose sorted key ``i * n_tri + j`` is ``key`` (-1 if
+    none), and ``r`` the first index of ``crack_keys`` at or after ``key``, searched forward
+    from ``start`` (a merge over sorted keys: pass the last ``r``; 0 or any lower bound)."""
+    r = start
+    n = crack_keys.shape[0]
+    while r < n and crack_keys[r] < key:
+        r += 1
+    return (crack_order[r] if r < n and crack_keys[r] == key else -1), r
+
+
 @njit(cache=True, error_model="numpy")
 def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken, kt_tri,
                    mass_tri, damping_ratio):
-    """``(mu_base, kt_pair, damp_pair)`` of every candidate pair (:func:`pair_constants_one`)."""
+    """``(mu_base, kt_pair, damp_pair)`` of every candidate pair (:func:`pair_constants_one`);
+    the crack elements between pairs are found by one merge over the sorted keys (pairs sorted by
+    ``(i, j)``, as every search makes them; a key out of order restarts by bisection)."""
     n = pair_i.shape[0]
     mu_base = np.empty(n)
     kt_pair = np.empty(n)
     damp_pair = np.empty(n)
     for q in range(n):
-        pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken,
-                           kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair)
+        pair_constants_one(q, pair_i, pair_j, -1, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
+                           mu_base, kt_pair, damp_pair)
+    if any_broken:  # then the pairs across a crack element, found by one merge over the sorted keys
+        r = 0
+        last = -1
+        for q in range(n):
+            key = pair_i[q] * n_tri + pair_j[q]
+            if key < last:
+                r = lower_bound(crack_keys, key)
+            crack, r = crack_between(key, crack_keys, crack_order, r)
+            last = key
+            if crack >= 0:
+                mu_base[q] = crack_friction(crack, broken, crack_mu, mu_base[q])
+    return mu_base, kt_pair, damp_pair
+    crack = np.empty(n, np.int64)  # the merge in a pass of its own keeps the constants' loop simple
+    r = 0
+    last = -1
+    for q in range(n):
+        key = pair_i[q] * n_tri + pair_j[q]
+        if key < last:
+            r = lower_bound(crack_keys, key)
+        crack[q], r = crack_between(key, crack_keys, crack_order, r)
+        last = key
+    for q in range(n):
+        pair_constants_one(q, pair_i, pair_j, crack[q], mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
+                           mu_base, kt_pair, damp_pair)
     return mu_base, kt_pair, damp_pair
 
 

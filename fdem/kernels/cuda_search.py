@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from numba import cuda
 
-from fdem.kernels.contact_pairs import carry_history_one, pair_constants_one
+from fdem.kernels.contact_pairs import carry_history_one, crack_between, lower_bound, pair_constants_one
 from fdem.kernels.contact_search import _fill_partners, _query, box_cells, triangle_box
 
 __all__ = ["boxes_kernel", "bin_count_kernel", "bin_fill_kernel", "partner_count_kernel", "partner_fill_kernel",
@@ -92,10 +92,14 @@ def pair_kernel(pair_i, pair_j, n_tri, old_keys, old_hist, keys, hist, touching,
     """Pair ``q``: its key ``i n_tri + j``, its history carried from the old list, its constants."""
     q = cuda.grid(1)
     if q < pair_i.shape[0]:
-        keys[q] = pair_i[q] * n_tri + pair_j[q]
+        key = pair_i[q] * n_tri + pair_j[q]
+        keys[q] = key
         carry_history_one(q, old_keys, old_hist, keys, hist, touching)
-        pair_constants_one(q, pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken,
-                           kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair)
+        crack = -1
+        if any_broken:  # one thread a pair: bisection, then the merge's step
+            crack, _ = crack_between(key, crack_keys, crack_order, lower_bound(crack_keys, key))
+        pair_constants_one(q, pair_i, pair_j, crack, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
+                           mu_base, kt_pair, damp_pair)
 
 
 @cuda.jit
