@@ -13,11 +13,13 @@ Prints and saves ``docs/benchmarks/runout_step.json`` (distance, broken elements
 energy, steps, wall time, ledger balance per run; machine, threads, load).
 
     NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_runout_step.py --seeds 6
-    NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_runout_step.py --scene four-slopes --size 1.0 --max-time 2 --seeds 4
+    NUMBA_NUM_THREADS=1 python cases/benchmarks/bench_runout_step.py --scene four-slopes --size 1.0 --max-time 2 --seeds 4 \
+        --runs-file docs/benchmarks/runout_step_four_slopes_runs.jsonl
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -72,13 +74,28 @@ def main(argv=None) -> dict:
     parser.add_argument("--scene", choices=("demo", "four-slopes"), default="demo")
     parser.add_argument("--size", type=float, default=None, help="element size [m] (default: the scene's)")
     parser.add_argument("--max-time", type=float, default=None, help="cap on the runout [s] (default the stage's)")
+    parser.add_argument("--runs-file", type=Path, default=None,
+                        help="JSON-lines file: each run is appended as it ends, and runs already there "
+                             "(same scene, size, cap, fraction, seed and nudge) are read back, not rerun")
     args = parser.parse_args(argv)
     threads = int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1))
     start, meta = failed_state(args.scene, args.size)
     runs = []
+    done = {}
+    key = lambda r: (r["scene"], r["size"], r["max_time"], r["dt_fraction"], r["seed"], r["kick_m_s"])  # noqa: E731
+    if args.runs_file is not None and args.runs_file.exists():
+        for line in args.runs_file.read_text().splitlines():
+            r = json.loads(line)
+            done[key(r)] = r
     for seed in range(args.seeds):  # interleaved, so that a change of load falls on both
         for f in args.fractions:
-            r = runout(args.scene, args.size, start, f, seed, args.kick, args.max_time)
+            tag = {"scene": args.scene, "size": args.size, "max_time": args.max_time}
+            r = done.get(key({**tag, "dt_fraction": f, "seed": seed, "kick_m_s": args.kick}))
+            if r is None:
+                r = {**tag, **runout(args.scene, args.size, start, f, seed, args.kick, args.max_time)}
+                if args.runs_file is not None:  # an hours-long comparison keeps every finished run
+                    with args.runs_file.open("a") as fh:
+                        fh.write(json.dumps(r) + "\n")
             runs.append(r)
             print(f"dt_fraction {f}: seed {seed}: {r['runout_distance_m']:.2f} m, {r['broken_in_runout']} broken, "
                   f"{r['steps']} steps, {r['wall_s']:.0f} s ({r['reason']})", flush=True)
