@@ -10,18 +10,20 @@ __all__ = ["HistoryWriter", "read_history"]
 
 
 class HistoryWriter:
-    """CSV history: header from the first row's keys; each row is appended and flushed."""
+    """CSV history: header ``columns`` (default: the first row's keys); each row is appended
+    and flushed, a column a row lacks left empty."""
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, columns: list[str] | None = None):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.columns: list[str] | None = None
+        self.columns: list[str] | None = None if columns is None else list(columns)
         self._fh = None
         self._writer = None
 
     def write(self, row: dict) -> None:
-        if self.columns is None:
-            self.columns = list(row)
+        if self._fh is None:
+            if self.columns is None:
+                self.columns = list(row)
             self._fh = open(self.path, "w", newline="")
             self._writer = csv.writer(self._fh)
             self._writer.writerow(self.columns)
@@ -44,7 +46,8 @@ def _fmt(value) -> str:
 
 
 def read_history(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Columns of a history CSV as arrays (numeric where possible)."""
+    """Columns of a history CSV as arrays (numeric where possible; an empty cell, a row written
+    before its monitor was added, is nan)."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
     header, body = rows[0], rows[1:]
@@ -52,7 +55,7 @@ def read_history(path: str | os.PathLike) -> dict[str, np.ndarray]:
     for j, name in enumerate(header):
         col = [r[j] for r in body]
         try:
-            out[name] = np.array([float(c) for c in col])
+            out[name] = np.array([float(c) if c != "" else np.nan for c in col])  # "": a row before the column began
         except ValueError:
             out[name] = np.array(col)
     return out

@@ -9,6 +9,9 @@ unit in brackets (``[-]`` for a pure number).
   perceptual colour map, colour bar in m), the pre-failure outline dashed beneath it, the intact
   joint elements thin, the broken crack elements on top coloured by failure mode (I tensile,
   II shear, mixed), and optionally displacement or velocity arrows (subsampled).
+* :func:`mechanism_frames`: the failure mechanism as the four-slope paper draws it (its Fig. 3):
+  displacement with the activated (slipping, unbroken) and broken crack elements in black, one
+  panel per moment (mid-failure, at rest), the locked part of the failed mass outlined.
 * :func:`geostatic_stress_map`: sigma_yy [kPa] and its ratio to the lithostatic ``rho g d``.
 * :func:`crack_time_map`: the broken crack elements coloured by their time of breakage.
 * :func:`kinetic_energy_plot`: kinetic energy [J/m] against time, stages shaded and labelled.
@@ -26,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["MODE_COLOURS", "MODE_LABELS", "new_figure", "save_figure", "finish", "mode_codes", "as_segments",
-           "boundary_segments", "arrow_sample", "draw_failure", "failure_frame", "geostatic_stress_map",
+           "boundary_segments", "arrow_sample", "draw_failure", "failure_frame", "crack_segments_at", "mechanism_frames", "geostatic_stress_map",
            "crack_time_map", "stage_spans", "group_label", "group_stages", "stage_label_rows", "mark_stages", "kinetic_energy_plot",
            "crack_count_plot", "fragment_size_plot"]
 
@@ -287,6 +290,97 @@ def failure_frame(path: str | os.PathLike | None, x: np.ndarray, triangles, disp
                  vmax, cmap)
     if title:
         ax.set_title(title, pad=14 if vec is not None else 6)
+    fig.tight_layout()
+    return finish(fig, path, dpi)
+
+
+def crack_segments_at(x: np.ndarray, crack_nodes: np.ndarray) -> np.ndarray:
+    """(n_crack, 2, 2) mid-line of every crack element at positions ``x`` [m]: from the midpoint
+    of its nodes 0 and 3 to that of 1 and 2 (``Simulation.crack_geometry``'s points)."""
+    cn = np.asarray(crack_nodes, dtype=np.int64)
+    x = np.asarray(x, dtype=np.float64)
+    return np.stack([0.5 * (x[cn[:, 0]] + x[cn[:, 3]]), 0.5 * (x[cn[:, 1]] + x[cn[:, 2]])], axis=1)
+
+
+def mechanism_frames(path: str | os.PathLike | None, triangles, crack_nodes, panels: list[dict],
+                     joint: np.ndarray | None = None, outline: np.ndarray | None = None,
+                     locked: np.ndarray | None = None, crack_triangles: np.ndarray | None = None,
+                     cmap: str = "viridis", dpi: int = 150):
+    """The failure mechanism, one panel per moment, as the four-slope paper's Fig. 3 draws it.
+
+    Each panel is a dict with ``x`` (n_nodes, 2) positions [m], ``displacement`` (n_tri,) or
+    (n_nodes,) magnitude [m], ``status`` (n_crack,) 0 intact, 1 activated (past its elastic range,
+    slipping or softening, unbroken), 2 broken (:func:`fdem.results.motion.crack_status`) and a
+    ``title``. Activated crack elements are drawn thin black, broken ones thick black, intact
+    joints (``joint``, (n_crack,) bool) thin light grey; the colour scale is shared by all panels
+    (up to the largest displacement). ``locked`` (n_tri,) bool with ``crack_triangles`` (n_crack,
+    2) outlines the locked part of the failed mass (magenta: the crack elements with exactly one
+    locked side) in every panel. ``outline`` as in :func:`failure_frame`. Returns the path, or the
+    Figure when ``path`` is None.
+    """
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.tri import Triangulation
+    from mpl_toolkits.axes_grid1 import make_axes_locatable
+
+    if not panels:
+        raise ValueError("mechanism_frames needs at least one panel")
+    cn = np.asarray(crack_nodes, dtype=np.int64)
+    n_crack = len(cn)
+    jt = None if joint is None else np.asarray(joint, dtype=bool)
+    if jt is not None and jt.shape != (n_crack,):
+        raise ValueError(f"joint must have shape ({n_crack},) like crack_nodes, got {jt.shape}")
+    rim = None
+    if locked is not None:
+        lk = np.asarray(locked, dtype=bool)
+        if crack_triangles is None:
+            raise ValueError("locked needs crack_triangles to find the locked part's outline")
+        ct = np.asarray(crack_triangles, dtype=np.int64)
+        rim = lk[ct[:, 0]] != lk[ct[:, 1]]
+    checked = []
+    for k, p in enumerate(panels):
+        x, tri = _check_mesh(p["x"], triangles)
+        u = _per_triangle(p["displacement"], x, tri, f"panels[{k}].displacement")
+        st = np.asarray(p["status"])
+        if st.shape != (n_crack,):
+            raise ValueError(f"panels[{k}].status must have shape ({n_crack},) like crack_nodes, got {st.shape}")
+        checked.append((x, tri, u, st, str(p.get("title", ""))))
+    vmax = max(float(c[2].max()) if c[2].size else 0.0 for c in checked) or 1.0
+    width = 11.0
+    fig = new_figure((width, sum(_figsize(c[0], width)[1] for c in checked)))
+    out = None if outline is None else as_segments(outline, "outline")
+    for k, (x, tri, u, st, title) in enumerate(checked):
+        ax = fig.add_subplot(len(checked), 1, k + 1)
+        if out is not None and len(out):
+            ax.add_collection(LineCollection(out, colors="0.25", linewidths=0.9, linestyles=(0, (4, 2)), zorder=1))
+        pc = ax.tripcolor(Triangulation(x[:, 0], x[:, 1], tri), facecolors=u, cmap=cmap, shading="flat",
+                          vmin=0.0, vmax=vmax, edgecolors="face", linewidth=0.0, antialiased=False,
+                          rasterized=True, zorder=2)
+        cax = make_axes_locatable(ax).append_axes("right", size="2%", pad=0.1)
+        fig.colorbar(pc, cax=cax, label="displacement magnitude [m]")
+        segs = crack_segments_at(x, cn)
+        handles = []
+        if jt is not None:
+            quiet = jt & (st == 0)
+            ax.add_collection(LineCollection(segs[quiet], colors="0.85", linewidths=0.3, zorder=3))
+            handles.append(Line2D([], [], color="0.85", lw=1.0, label=f"joint, elastic: {int(quiet.sum())}"))
+        for code, lw, label in ((1, 0.6, "activated (slipping, unbroken)"), (2, 1.6, "broken")):
+            sel = st == code
+            ax.add_collection(LineCollection(segs[sel], colors="k", linewidths=lw, zorder=4 + code,
+                                             gid=f"status-{code}"))
+            handles.append(Line2D([], [], color="k", lw=lw + 0.6, label=f"{label}: {int(sel.sum())}"))
+        if rim is not None and rim.any():
+            ax.add_collection(LineCollection(segs[rim], colors="#d61fd6", linewidths=1.4, zorder=7, gid="locked"))
+            handles.append(Line2D([], [], color="#d61fd6", lw=2.0, label="outline of the locked part"))
+        leg = ax.legend(handles=handles, loc="upper left", fontsize=7, title="crack elements", title_fontsize=7,
+                        facecolor="0.35", labelcolor="w", framealpha=0.9)
+        leg.get_title().set_color("w")
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        if title:
+            ax.set_title(title)
     fig.tight_layout()
     return finish(fig, path, dpi)
 

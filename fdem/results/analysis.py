@@ -14,7 +14,7 @@ from fdem.mesh.triangles import triangle_areas
 
 __all__ = ["fragments", "fragment_areas", "weighted_percentile", "triangle_displacement", "displaced",
            "displacement_statistics", "runout", "deposit_profile", "failure_surface", "fragment_statistics",
-           "released_kinetic_energy", "history_columns"]
+           "released_kinetic_energy", "history_columns", "crack_breakdown"]
 
 
 def fragments(topology: Topology, broken: np.ndarray) -> tuple[int, np.ndarray]:
@@ -206,6 +206,40 @@ def failure_surface(topology: Topology, x: np.ndarray, broken: np.ndarray, slipp
     moved = displaced(topology, x, threshold) if mask is None else np.asarray(mask, bool)
     a, b = moved[topology.crack_triangles[:, 0]], moved[topology.crack_triangles[:, 1]]
     return np.flatnonzero(failed & (a != b))
+
+
+def crack_breakdown(crack_tag: np.ndarray, inelastic: np.ndarray, broken: np.ndarray,
+                    failure_mode: np.ndarray) -> dict:
+    """Crack elements split by tag: intact rock (tag 0) against joints (tags > 0), and each tag.
+
+    ``crack_tag`` (n,) int, ``Topology.crack_tag``; ``inelastic`` (n,) bool or the ids of the
+    elements past their elastic range (``CrackSet.inelastic()``); ``broken`` (n,) bool;
+    ``failure_mode`` (n,) 0 intact, 1 I, 2 II, 3 mixed (``CrackSet.failure_mode``). Each group
+    gets ``n_elements``, ``activated`` (past the elastic range, slipping or softening, but not
+    broken), ``broken`` and ``broken_by_mode`` (``I``, ``II``, ``mixed``). The paper's figures
+    draw activated and broken joints; the split says whether a slope failed through its joints
+    or through intact rock bridges.
+    """
+    tag = np.asarray(crack_tag, dtype=np.int64)
+    n = tag.size
+    broken = np.asarray(broken, dtype=bool)
+    mode = np.asarray(failure_mode)
+    ine = np.asarray(inelastic)
+    if ine.dtype != bool:
+        mask = np.zeros(n, bool)
+        mask[ine.astype(np.int64)] = True
+        ine = mask
+    for name, a in (("inelastic", ine), ("broken", broken), ("failure_mode", mode)):
+        if a.shape != (n,):
+            raise ValueError(f"{name} must have shape ({n},) like crack_tag, got {a.shape}")
+
+    def group(sel: np.ndarray) -> dict:
+        b = sel & broken
+        return {"n_elements": int(sel.sum()), "activated": int((sel & ine & ~broken).sum()), "broken": int(b.sum()),
+                "broken_by_mode": {m: int((b & (mode == code)).sum()) for m, code in (("I", 1), ("II", 2), ("mixed", 3))}}
+
+    return {"rock": group(tag == 0), "joints": group(tag > 0),
+            "by_tag": {str(t): group(tag == t) for t in np.unique(tag)}}
 
 
 def fragment_statistics(topology: Topology, broken: np.ndarray, bins_per_decade: int = 4,

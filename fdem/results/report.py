@@ -4,14 +4,18 @@
 value per history row: cracks broken by mode, fragments) and, at the end, writes
 
 * ``summary.json``: stages, factor of safety, runout distance and volume, displacement
-  percentiles, peak and released kinetic energy, cracks by mode, fragments and their sizes,
+  percentiles, peak and released kinetic energy, cracks by mode and by tag (intact rock against
+  joints: activated and broken), the locked part of the failed mass
+  (:mod:`fdem.results.motion`), fragments and their sizes,
   micro-seismic event statistics, the ledger error;
 * ``events.csv``: the micro-seismic catalogue (:func:`fdem.results.events.cluster_events`; a
   "no events" line when nothing broke);
 * ``kinetic_energy.png``, ``cracks_by_mode.png``, ``magnitudes.png`` (when there are events),
   ``fragments.png``, ``failure.png`` (displacement on the deformed mesh over the outline before
   failure, intact joints thin, broken crack elements by mode, displacement arrows,
-  :func:`fdem.io.pictures.failure_frame`), ``crack_times.png`` (broken elements by time of
+  :func:`fdem.io.pictures.failure_frame`), ``mechanism.png`` (the paper's Fig. 3: activated and
+  broken crack elements in black at mid-failure and at the end, the locked part of the failed
+  mass outlined, :meth:`RunReport.mechanism_picture`), ``crack_times.png`` (broken elements by time of
   breakage), ``geostatic_stress.png`` (sigma_yy against the overburden weight ``rho g d`` at the
   end of the equilibrium stage, or at the start of a run that began from a geostatic start) and
   ``failure.gif`` (the run's ``.pvd`` frames animated, :mod:`fdem.io.animation`).
@@ -26,6 +30,7 @@ import math
 from pathlib import Path
 import numpy as np
 from fdem.results import analysis, events, overburden
+from fdem.results.motion import MotionRecord, crack_status
 from fdem.io import animation, pictures
 from fdem.solve.simulation import Simulation
 
@@ -106,6 +111,10 @@ class RunReport:
             return float(cracks.n_inelastic())
 
         sim.add_monitor("inelastic", inelastic)
+        # when each triangle last moved: the locked part of the failed mass, and the
+        # mid-failure state of the mechanism picture; the column is the failed mass's D90 [m]
+        self.motion = MotionRecord(topo, cracks, threshold=self.threshold)
+        sim.add_monitor("failed_d90", self.motion)
         if fragments_every:
             self._frag_cache = (-1, 0)
 
@@ -148,6 +157,10 @@ class RunReport:
                                "fracture_J_per_m": float(hist[-1].get("fracture", 0.0)) if hist else 0.0},
             "cracks": {"broken": int(cracks.broken.sum()), "inelastic": int(cracks.n_inelastic()),
                        "by_mode": {m: int((modes == m).sum()) for m in ("I", "II", "mixed")}},
+            "cracks_by_tag": analysis.crack_breakdown(topo.crack_tag, cracks.inelastic(), cracks.broken,
+                                                      cracks.failure_mode),
+            "locked": {k: v for k, v in self.motion.locked(x).items() if k != "mask"},
+            "mid_failure": self._mid_failure_figures(),
             "fragments": {k: frag[k] for k in ("n_fragments", "n_single_triangles", "n_blocks", "largest_share")},
             "events": cat.summary() if not cat.empty else {"n_events": 0, "note": "no events: nothing broke"},
             "magnitudes": (None if mags.size < 2 else events.magnitude_statistics(mags)
@@ -158,6 +171,35 @@ class RunReport:
         if extra:
             out.update(extra)
         return jsonable(out)
+
+    def _mid_failure_figures(self) -> dict | None:
+        snap = self.motion.mid_failure(self.motion.d90(self.sim.state.x))
+        return None if snap is None else {"time_s": snap["time"], "step": snap["step"], "d90_m": snap["d90"]}
+
+    def mechanism_picture(self, path) -> Path:
+        """``mechanism.png``: displacement with the activated and broken crack elements in black
+        at mid-failure (when the run has a snapshot of it) and at the end, the locked part of the
+        failed mass outlined (:func:`fdem.io.pictures.mechanism_frames`)."""
+        sim, topo = self.sim, self.sim.model.topology
+        x = sim.state.x
+        final = self.motion.d90(x)
+        locked = self.motion.locked(x)
+        panels = []
+        snap = self.motion.mid_failure(final)
+        if snap is not None and snap["d90"] < final:
+            xs = np.asarray(snap["x"], np.float64)
+            panels.append({"x": xs, "displacement": analysis.triangle_displacement(topo, xs), "status": snap["status"],
+                           "title": f"mid-failure, t = {snap['time']:.3g} s: the failed mass's D90 "
+                                    f"{snap['d90']:.3g} m of its final {final:.3g} m"})
+        panels.append({"x": x, "displacement": analysis.triangle_displacement(topo, x), "status": crack_status(self.cracks),
+                       "title": (f"end of the run, t = {sim.state.time:.3g} s"
+                                 + (f"; locked part {locked['area_m2']:.3g} m$^2$ "
+                                    f"({100 * locked['share_of_failed']:.0f} % of the failed mass)"
+                                    if locked["n_triangles"] else ""))})
+        return pictures.mechanism_frames(path, topo.triangles, topo.crack_nodes, panels, joint=topo.crack_tag > 0,
+                                         outline=pictures.boundary_segments(topo.x0, topo.boundary_edges),
+                                         locked=locked["mask"] if locked["n_triangles"] else None,
+                                         crack_triangles=topo.crack_triangles)
 
     def write(self, out_dir, extra: dict | None = None, pictures_on: bool = True) -> dict:
         """Write ``summary.json``, ``events.csv`` and (``pictures_on``) the PNG plots into ``out_dir``."""
@@ -210,6 +252,7 @@ class RunReport:
                                               np.linalg.norm(disp, axis=1), g["points"], cracks.broken,
                                               cracks.failure_mode, outline=outline, joint=joint, vectors=disp,
                                               title=f"t = {sim.state.time:.3g} s: displacement and crack elements"))
+        written.append(self.mechanism_picture(out / "mechanism.png"))
         if len(ev):
             written.append(pictures.crack_time_map(out / "crack_times.png", topo.x0, topo.triangles,
                                                    topo.x0[topo.crack_nodes[:, :2]],

@@ -353,8 +353,16 @@ class Simulation:
             self.dt = self._choose_dt()
 
     def add_monitor(self, name: str, fn: Callable[["Simulation"], float]) -> None:
-        """Record ``fn(sim)`` as column ``name`` of every history row."""
+        """Record ``fn(sim)`` as column ``name`` of every history row. A monitor that keeps
+        its own record between rows (``fn`` with ``state_dict()`` and ``load_state_dict(d)``,
+        e.g. :class:`fdem.results.motion.MotionRecord`) is saved with a checkpoint and restored
+        with it."""
         self.monitors[name] = fn
+
+    @property
+    def stage(self) -> str:
+        """Name of the stage the simulation is running or last ran (the history's ``stage``)."""
+        return self._stage
 
     def add_point_monitor(self, name: str, x: float, y: float) -> "PointMonitor":
         """Watch the material point at ``(x, y)`` [m] of the reference configuration.
@@ -893,7 +901,11 @@ class Simulation:
                 series.frames = [(t, p.name) for t, p in read_pvd(series.pvd_path)][: self._frames]
         if self._history_writer is not None:
             self._history_writer.close()
-            self._history_writer = history_file.HistoryWriter(self.out_dir / "history.csv")
+            # the header is the saved rows' columns and this run's monitors: a monitor added
+            # since the checkpoint was written gets its column, empty in the rows before it
+            columns = list(dict.fromkeys([k for row in self.history for k in row] + list(self.monitors)))
+            self._history_writer = history_file.HistoryWriter(self.out_dir / "history.csv",
+                                                              columns=columns if self.history else None)
             for row in self.history:
                 self._history_writer.write(row)
 
@@ -1129,6 +1141,8 @@ class Simulation:
             "providers": [p.state_dict() for p in self.providers],
             "sleeping": None if self.sleeping is None else self.sleeping.state_dict(),
             "point_monitors": [m.state_dict() for m in self.point_monitors.values()],
+            "monitor_records": {name: fn.state_dict() for name, fn in self.monitors.items()
+                                if callable(getattr(fn, "state_dict", None))},
         }
 
     def _restore_point_monitors(self, saved: list) -> None:
@@ -1198,6 +1212,10 @@ class Simulation:
                            float(g["time"]), int(g["step"]))
         for p, s in zip(self.providers, saved):  # every provider: load_state_dict(d, x), x the restored positions
             p.load_state_dict(s, x=st.x)
+        for name, record in (d.get("monitor_records") or {}).items():  # older checkpoints: none
+            fn = self.monitors.get(name)
+            if callable(getattr(fn, "load_state_dict", None)):  # a monitor added here and not then starts afresh
+                fn.load_state_dict(record)
         if d.get("inertia") is not None and self.density_scaling and self.user_dt is None and self.exploded:
             self.inertia = np.array(d["inertia"], dtype=np.float64)
             self._scaled_dt = float(d["scaled_dt"])

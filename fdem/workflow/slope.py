@@ -20,8 +20,9 @@ Composed of :mod:`fdem.workflow.stages` so that a case script only builds the mo
    ``runout_start.npz`` (:func:`fdem.solve.checkpoint.load_checkpoint` restarts from it).
 
 Every stage's result (why it ended, when, how many steps) goes into the returned summary, and
-every ending is one of its outcomes: ``stable``, ``failed``, ``time_capped``, ``interrupted``
-(Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
+every ending is one of its outcomes: ``stable``, ``failed``, ``crept`` (the failing stage did not
+settle, but the runout came to rest after less than the failure displacement: the slope crept
+and stopped), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
 step: the reason, and the last good state to resume from with a smaller step). With a
 :class:`~fdem.workflow.journal.RunJournal` the run writes resumable checkpoints and a resumed
 run replays the workflow to where it stopped (:mod:`fdem.workflow.journal`).
@@ -287,7 +288,32 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                 return str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
 
             summary["runout_checkpoint"] = journal.once("runout_start", save_start) if journal else save_start()
-        record(run_stage(sim, runout_stage(wf, T, height, g), journal=journal))
+        runout = record(run_stage(sim, runout_stage(wf, T, height, g), journal=journal))
+        _tell_creep(summary, runout, fail.displacement)
+
+
+def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
+    """A slope whose failing stage did not settle within its cap but that came to rest in the
+    runout having moved less than the failure displacement (1 % of the height) crept and
+    stopped: it did not fail at that factor. Its outcome is ``crept``; ``crept_at_factor`` is
+    the factor, ``failed_at_factor`` goes back to None, and the reduction-step bracket reads it
+    as a factor the slope stands at (:func:`factor_of_safety_figures`). The creep is bounded by
+    the sum of the two stages' largest node displacements."""
+    if runout.reason != "converged" or len(summary["stages"]) < 2:
+        return
+    failing = summary["stages"][-2]
+    if failing.get("reason") == "failed":  # the failing stage itself saw a node move the failure displacement
+        return
+    creep = float(failing["max_displacement"]) + float(runout.max_displacement)
+    if creep >= fail_displacement:
+        return
+    factor = summary["failed_at_factor"]
+    summary["outcome"] = "crept"
+    summary["crept_at_factor"] = factor
+    summary["failed_at_factor"] = None
+    summary["crept_m"] = creep
+    summary["ending"] = (f"crept at most {creep:.3g} m at F = {factor:.4g} and came to rest: no failure "
+                         f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height)")
 
 
 def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:
@@ -344,6 +370,8 @@ def factor_of_safety_figures(result: dict) -> dict:
     stable = [st["reduction"] for st in result["stages"]
               if st["name"].startswith("reduction") or st["name"] == "equilibrium"
               if st["reason"] == "converged"]
+    if result.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
+        stable.append(result["crept_at_factor"])
     failing = result.get("failed_at_factor")
     if failing is None or not stable:
         return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from fdem.io.animation import animate_series, pick_frames
-from fdem.io.pictures import (arrow_sample, boundary_segments, crack_count_plot, crack_time_map, failure_frame,
+from fdem.io.pictures import (arrow_sample, boundary_segments, crack_count_plot, crack_segments_at, crack_time_map,
+                              failure_frame, mechanism_frames,
                               fragment_size_plot, geostatic_stress_map, group_label, group_stages, kinetic_energy_plot,
                               stage_label_rows,
                               stage_spans)
@@ -34,6 +35,20 @@ def wedge_scene():
     mode = np.where(broken, 1 + np.arange(TOPO.n_cracks) % 3, 0)
     segs = x[TOPO.crack_nodes[:, :2]]
     return x, broken, mode, segs
+
+
+def wedge_mask():
+    c0 = TOPO.x0[TOPO.triangles].mean(axis=1)
+    return c0[:, 1] > c0[:, 0] - 5.0
+
+
+def mechanism_panels(x, broken):
+    """Mid-failure (half the wedge's travel, its rim activated) and the end (its rim broken)."""
+    status = np.where(broken, 2, 0).astype(np.int8)
+    half = TOPO.x0 + 0.5 * (x - TOPO.x0)
+    return [{"x": half, "displacement": np.linalg.norm(half - TOPO.x0, axis=1), "status": np.where(broken, 1, 0),
+             "title": "mid-failure"},
+            {"x": x, "displacement": np.linalg.norm(x - TOPO.x0, axis=1), "status": status, "title": "end"}]
 
 
 def many_stages(n=40, seed=1):
@@ -127,6 +142,9 @@ def all_figures():
     return {
         "failure_frame": failure_frame(None, x, TOPO, u, segs, broken, mode, outline=outline,
                                        joint=TOPO.crack_tag >= 0, vectors=x - TOPO.x0, title="wedge"),
+        "mechanism_frames": mechanism_frames(None, TOPO, TOPO.crack_nodes, mechanism_panels(x, broken),
+                                             joint=TOPO.crack_tag >= 0, outline=outline,
+                                             locked=wedge_mask(), crack_triangles=TOPO.crack_triangles),
         "geostatic_stress_map": geostatic_stress_map(None, TOPO.x0, TOPO, -1e4 * (10 - TOPO.x0[TOPO.triangles].mean(1)[:, 1]),
                                                      np.ones(TOPO.n_triangles), outline=outline),
         "crack_time_map": crack_time_map(None, TOPO.x0, TOPO, TOPO.x0[TOPO.crack_nodes[:, :2]], ev_el,
@@ -249,6 +267,27 @@ def test_failure_frame_draws_outline_intact_joints_and_a_readable_number_of_arro
     np.testing.assert_allclose(np.hypot(arrows.U, arrows.V), np.hypot(1.5, 1.0))
     with pytest.raises(ValueError, match="joint must have shape"):
         failure_frame(None, x, TOPO, np.zeros(TOPO.n_triangles), segs, broken, mode, joint=joint[:-1])
+
+
+def test_mechanism_frames_draw_activated_and_broken_elements_in_black_and_the_locked_rim():
+    x, broken, mode, segs = wedge_scene()
+    panels = mechanism_panels(x, broken)
+    fig = mechanism_frames(None, TOPO, TOPO.crack_nodes, panels, joint=np.zeros(TOPO.n_cracks, bool),
+                           locked=wedge_mask(), crack_triangles=TOPO.crack_triangles)
+    mid, end = (ax for ax in fig.axes if ax.get_title())
+    for ax, panel, code in ((mid, panels[0], "status-1"), (end, panels[1], "status-2")):
+        by_gid = {c.get_gid(): c for c in ax.collections}
+        np.testing.assert_allclose(np.array(by_gid[code].get_segments()),
+                                   crack_segments_at(panel["x"], TOPO.crack_nodes)[broken])
+        assert {tuple(c) for c in by_gid[code].get_colors()[:, :3]} == {(0.0, 0.0, 0.0)}  # black
+        np.testing.assert_allclose(np.array(by_gid["locked"].get_segments()),  # the wedge's rim is its outline
+                                   crack_segments_at(panel["x"], TOPO.crack_nodes)[broken])
+    assert max({c.get_gid(): c for c in mid.collections}["status-1"].get_linewidths()) < \
+        min({c.get_gid(): c for c in end.collections}["status-2"].get_linewidths())
+    with pytest.raises(ValueError, match="status must have shape"):
+        mechanism_frames(None, TOPO, TOPO.crack_nodes, [{**panels[0], "status": panels[0]["status"][:-1]}])
+    with pytest.raises(ValueError, match="crack_triangles"):
+        mechanism_frames(None, TOPO, TOPO.crack_nodes, panels, locked=wedge_mask())
 
 
 def test_arrow_sample_spreads_at_most_the_asked_number_of_points():

@@ -36,7 +36,7 @@ def test_run_report_after_failure_and_runout(tmp_path):
     out = report.write(tmp_path, extra={"workflow": summary})
     assert summary["outcome"] == "failed"
     for name in ("summary.json", "events.csv", "kinetic_energy.png", "cracks_by_mode.png", "failure.png",
-                 "history.csv", "planar.pvd"):
+                 "mechanism.png", "history.csv", "planar.pvd"):
         assert (tmp_path / name).stat().st_size > 0, name
     data = json.loads((tmp_path / "summary.json").read_text())
     assert _finite(data)
@@ -48,3 +48,15 @@ def test_run_report_after_failure_and_runout(tmp_path):
     broken = np.array([r["broken_I"] + r["broken_II"] + r["broken_mixed"] for r in sim.history])
     assert np.all(np.diff(broken) >= 0) and broken[-1] == data["cracks"]["broken"]
     assert np.all(np.array([r["fragments"] for r in sim.history]) >= 1)
+    # crack elements by tag add up to the totals; activated ones are past the elastic range, unbroken
+    tags = data["cracks_by_tag"]
+    assert tags["rock"]["broken"] + tags["joints"]["broken"] == data["cracks"]["broken"]
+    assert sum(g["broken"] for g in tags["by_tag"].values()) == data["cracks"]["broken"]
+    assert (tags["rock"]["activated"] + tags["joints"]["activated"]
+            == data["cracks"]["inelastic"] - data["cracks"]["broken"])
+    for g in (tags["rock"], tags["joints"]):
+        assert sum(g["broken_by_mode"].values()) == g["broken"]
+    # the failed mass's D90 on every row; the locked part is part of the failed mass
+    assert data["locked"]["failed_area_m2"] == data["runout"]["displaced_area_m2"]
+    assert 0 <= data["locked"]["area_m2"] <= data["locked"]["failed_area_m2"]
+    assert sim.history[-1]["failed_d90"] == data["locked"]["d90_m"]

@@ -1,0 +1,176 @@
+"""When each part of a failing slope moved: the locked part of the failed mass and the
+mid-failure snapshot.
+
+:class:`MotionRecord` is a history monitor (``Simulation.add_monitor``): at every history row it
+compares each triangle's centroid with where it last *moved*, and books the row's time when the
+centroid has travelled ``move_distance`` from there. At the end of a run this tells
+
+* the **locked part** of the failed mass (:meth:`MotionRecord.locked`): triangles that moved more
+  than ``threshold`` and then stopped while the rest of the mass ran on. A failed triangle is
+  locked when, at the last row it moved, the failed mass's 90th area percentile of displacement
+  ``D90`` was still below ``locked_share`` (one half) of its final value: it came to rest before
+  the mass had run half its way. The paper's "kinematically locked" blocks of a wedge that jams
+  against the toe while the blocks above it run out are such a part;
+* the **mid-failure state** (:meth:`MotionRecord.mid_failure`): positions and the crack elements'
+  status (intact, activated, broken) kept each time ``D90`` grows by ``sqrt(2)``, so the one
+  nearest half the final ``D90`` can be drawn after the run (the paper's Fig. 3 shows a slope
+  mid-failure and at rest). Snapshots below a quarter of the present ``D90`` are dropped (they
+  can no longer be the nearest to half the final one), so at most five are kept.
+
+``move_distance`` (default a quarter of ``threshold``, 2.5 cm) is a distance, not a speed: an
+elastic ringing of millimetres never counts as motion, a block sliding at any speed re-anchors
+within a row or a few. The time a triangle stopped is known to within the time it takes to
+move ``move_distance``. Rows of factor-of-safety trials (stage names ``trial...``), which start
+from a restored state, book no motion and take no snapshot. The record is saved with a
+checkpoint (:meth:`state_dict`) and restored with it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fdem.results.analysis import weighted_percentile
+
+__all__ = ["MotionRecord", "INTACT", "ACTIVATED", "BROKEN", "crack_status"]
+
+INTACT, ACTIVATED, BROKEN = 0, 1, 2
+"""Crack element status codes of a snapshot: elastic, past its elastic range (slipping or
+softening) but unbroken, broken."""
+
+
+def crack_status(cracks) -> np.ndarray:
+    """(n_cracks,) int8 status of a :class:`fdem.physics.cracks.CrackSet`'s elements in topology
+    order: :data:`INTACT`, :data:`ACTIVATED` (left the elastic range, not broken) or :data:`BROKEN`."""
+    status = np.zeros(len(cracks.broken), np.int8)
+    status[cracks.inelastic()] = ACTIVATED
+    status[np.asarray(cracks.broken, bool)] = BROKEN
+    return status
+
+
+class MotionRecord:
+    """History monitor of the failed mass's motion (see the module docstring).
+
+    Parameters
+    ----------
+    topology : the model's :class:`fdem.mesh.topology.Topology`
+    cracks : the :class:`fdem.physics.cracks.CrackSet` whose status the snapshots keep (or None)
+    threshold : displacement [m] above which a triangle belongs to the failed mass (0.1 m, as
+        :func:`fdem.results.analysis.runout`)
+    move_distance : travel [m] that counts as a move (default ``threshold / 4``)
+    locked_share : a failed triangle is locked when it last moved while ``D90`` was below this
+        share of its final value (default 0.5)
+    """
+
+    LADDER = math.sqrt(2.0)
+
+    def __init__(self, topology, cracks=None, threshold: float = 0.1, move_distance: float | None = None,
+                 locked_share: float = 0.5):
+        if not threshold > 0:
+            raise ValueError(f"threshold must be > 0 m, got {threshold}")
+        move_distance = threshold / 4.0 if move_distance is None else float(move_distance)
+        if not move_distance > 0:
+            raise ValueError(f"move_distance must be > 0 m, got {move_distance}")
+        if not 0 < locked_share < 1:
+            raise ValueError(f"locked_share must lie in (0, 1), got {locked_share}")
+        self.topology, self.cracks = topology, cracks
+        self.threshold, self.move_distance, self.locked_share = float(threshold), move_distance, float(locked_share)
+        self._tri = np.asarray(topology.triangles)
+        self._area = np.asarray(topology.triangle_area0, dtype=np.float64)
+        self._c0 = self._centroids(topology.x0)
+        n = len(self._tri)
+        self.anchor = None  # (n, 2) centroid where each triangle last moved; set at the first row
+        self.moved_time = np.full(n, np.nan)  # time of that row [s]
+        self.moved_d90 = np.full(n, np.nan)  # the failed mass's D90 then [m]
+        self.since_step: int | None = None  # the row the record began at (a resume of an older run: later)
+        self.snapshots: list[dict] = []
+        self._next_level = self.threshold
+
+    def _centroids(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(x)[self._tri].mean(axis=1)
+
+    def d90(self, x: np.ndarray) -> float:
+        """90th area percentile of the displacement of the triangles displaced more than
+        ``threshold`` [m] (0 when none is)."""
+        d = np.linalg.norm(self._centroids(x) - self._c0, axis=1)
+        failed = d > self.threshold
+        return weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
+
+    def __call__(self, sim) -> float:
+        """Book the row: the monitor's value is the failed mass's ``D90`` [m]."""
+        x = sim.state.x
+        c = self._centroids(x)
+        d = np.linalg.norm(c - self._c0, axis=1)
+        failed = d > self.threshold
+        d90 = weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
+        if str(getattr(sim, "stage", "")).startswith("trial"):
+            return d90  # a trial restarts from a restored state: its motion is not the run's
+        if self.anchor is None:
+            self.anchor = c.copy()
+            self.since_step = int(sim.state.step)
+            return d90
+        moved = np.linalg.norm(c - self.anchor, axis=1) > self.move_distance
+        self.anchor[moved] = c[moved]
+        self.moved_time[moved] = sim.state.time
+        self.moved_d90[moved] = d90
+        if d90 >= self._next_level:
+            self._snapshot(sim, d90)
+        return d90
+
+    def _snapshot(self, sim, d90: float) -> None:
+        status = crack_status(self.cracks) if self.cracks is not None else np.zeros(0, np.int8)
+        self.snapshots.append({"time": float(sim.state.time), "step": int(sim.state.step), "d90": float(d90),
+                               "x": np.asarray(sim.state.x, np.float32).copy(), "status": status})
+        while self._next_level <= d90:
+            self._next_level *= self.LADDER
+        self.snapshots = [s for s in self.snapshots if s["d90"] >= d90 / 4.0]
+
+    # ------------------------------------------------------------------ results
+    def mid_failure(self, final_d90: float) -> dict | None:
+        """The snapshot whose ``D90`` is nearest (by ratio) half ``final_d90``, or None."""
+        if not self.snapshots or not final_d90 > 0:
+            return None
+        return min(self.snapshots, key=lambda s: abs(math.log(s["d90"] / (0.5 * final_d90))))
+
+    def locked(self, x: np.ndarray) -> dict:
+        """The locked part of the failed mass at positions ``x`` (see the module docstring):
+        ``mask`` (n_tri,) bool and the figures ``area_m2``, ``share_of_failed``, ``n_triangles``,
+        ``mean_displacement_m``, ``stopped_s`` (first and last time one of them moved), the final
+        ``d90_m`` and the ``criterion``. A mass whose D90 did not exceed twice ``threshold`` ran
+        nowhere: nothing is locked."""
+        d = np.linalg.norm(self._centroids(x) - self._c0, axis=1)
+        failed = d > self.threshold
+        final = weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
+        mask = failed & (self.moved_d90 < self.locked_share * final) if final > 2.0 * self.threshold \
+            else np.zeros(len(d), bool)
+        area_failed = float(self._area[failed].sum())
+        out = {"mask": mask, "n_triangles": int(mask.sum()), "area_m2": float(self._area[mask].sum()),
+               "share_of_failed": float(self._area[mask].sum() / area_failed) if area_failed > 0 else 0.0,
+               "failed_area_m2": area_failed, "d90_m": float(final),
+               "mean_displacement_m": float(np.average(d[mask], weights=self._area[mask])) if mask.any() else 0.0,
+               "stopped_s": ([float(np.nanmin(self.moved_time[mask])), float(np.nanmax(self.moved_time[mask]))]
+                             if mask.any() else None),
+               "since_step": self.since_step,
+               "criterion": (f"displaced more than {self.threshold:g} m and last moved ({self.move_distance:g} m of "
+                             f"travel) while the failed mass's D90 was below {self.locked_share:g} of its final "
+                             f"{final:.3g} m")}
+        return out
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        return {"anchor": None if self.anchor is None else self.anchor.copy(), "moved_time": self.moved_time.copy(),
+                "moved_d90": self.moved_d90.copy(), "since_step": self.since_step,
+                "next_level": float(self._next_level), "snapshots": [dict(s) for s in self.snapshots]}
+
+    def load_state_dict(self, d: dict) -> None:
+        n = len(self._tri)
+        if np.shape(d["moved_time"]) != (n,):
+            raise ValueError(f"motion record of {np.shape(d['moved_time'])} triangles, this model has {n}")
+        self.anchor = None if d["anchor"] is None else np.array(d["anchor"], dtype=np.float64)
+        self.moved_time = np.array(d["moved_time"], dtype=np.float64)
+        self.moved_d90 = np.array(d["moved_d90"], dtype=np.float64)
+        self.since_step = None if d["since_step"] is None else int(d["since_step"])
+        self._next_level = float(d["next_level"])
+        self.snapshots = [{"time": float(s["time"]), "step": int(s["step"]), "d90": float(s["d90"]),
+                           "x": np.asarray(s["x"], np.float32), "status": np.asarray(s["status"], np.int8)}
+                          for s in d["snapshots"]]

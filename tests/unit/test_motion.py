@@ -1,0 +1,208 @@
+"""When each part of a failed mass moved (fdem.results.motion), crack elements by tag, the
+``crept`` outcome, and a monitor's record kept across a checkpoint.
+
+Kinematics with known answers: blocks of an exploded structured mesh moved rigidly, row by row,
+one of them stopping early while the other runs on."""
+import numpy as np
+import pytest
+
+from fdem.mesh.mesh import structured_rectangle
+from fdem.mesh.topology import build_topology
+from fdem.results.analysis import crack_breakdown
+from fdem.results.motion import MotionRecord
+from fdem.workflow.slope import _tell_creep, factor_of_safety_figures
+from fdem.workflow.stages import StageResult
+
+TOPO = build_topology(structured_rectangle(20, 4, 20.0, 4.0))  # 1 m cells, 160 triangles of 0.5 m^2
+C0 = TOPO.x0[TOPO.triangles].mean(axis=1)
+JAMMED = C0[:, 0] < 4.0  # 16 m^2: moves 0.5 m, then stops
+RUNNER = C0[:, 0] > 12.0  # 32 m^2: runs 8 m
+
+
+class Rows:
+    """A stand-in simulation: positions set row by row, the stage named per row."""
+
+    def __init__(self):
+        self.state = type("S", (), {})()
+        self.state.x, self.state.time, self.state.step = TOPO.x0.copy(), 0.0, 0
+        self.stage = "runout"
+
+    def move(self, which, dx, t):
+        self.state.x[TOPO.triangles[which].ravel()] += [dx, 0.0]
+        self.state.time, self.state.step = t, self.state.step + 100
+
+
+def run_rows(record, sim=None):
+    sim = sim or Rows()
+    record(sim)  # the first row anchors
+    for k in range(1, 5):  # 0.125 m per row for both: the jammed block stops at 0.5 m (t = 0.4 s)
+        sim.move(JAMMED | RUNNER, 0.125, 0.1 * k)
+        record(sim)
+    for k in range(5, 20):  # the runner alone, 0.5 m per row, to 8 m
+        sim.move(RUNNER, 0.5, 0.1 * k)
+        record(sim)
+    return sim
+
+
+def test_a_block_that_stops_while_the_mass_runs_on_is_locked_and_one_that_runs_is_not():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = run_rows(rec)
+    got = rec.locked(sim.state.x)
+    assert np.array_equal(got["mask"], JAMMED)
+    assert got["area_m2"] == pytest.approx(16.0)
+    assert got["share_of_failed"] == pytest.approx(16.0 / 48.0)
+    assert got["mean_displacement_m"] == pytest.approx(0.5)
+    assert got["stopped_s"] == pytest.approx([0.4, 0.4])  # the row it last travelled 2.5 cm
+    assert got["d90_m"] == pytest.approx(8.0)
+
+
+def test_a_mass_that_moves_together_has_no_locked_part():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = Rows()
+    rec(sim)
+    for k in range(1, 20):
+        sim.move(JAMMED | RUNNER, 0.4, 0.1 * k)
+        rec(sim)
+    assert rec.locked(sim.state.x)["n_triangles"] == 0
+
+
+def test_ringing_below_the_move_distance_is_no_motion():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = run_rows(rec)
+    for k in range(20, 40):  # the jammed block rings by +-1 cm (under 2.5 cm): still stopped at 0.4 s
+        sim.move(JAMMED, 0.01 * (-1) ** k, 0.1 * k)
+        rec(sim)
+    assert rec.locked(sim.state.x)["stopped_s"] == pytest.approx([0.4, 0.4])
+
+
+def test_rows_of_trials_book_no_motion():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = Rows()
+    rec(sim)
+    sim.stage = "trial_F1.5000"
+    sim.move(JAMMED, 3.0, 0.1)
+    rec(sim)
+    assert np.all(np.isnan(rec.moved_time)) and rec.snapshots == []
+
+
+def test_mid_failure_is_the_snapshot_nearest_half_the_final_spread():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = run_rows(rec)
+    assert 1 <= len(rec.snapshots) <= 5  # those under a quarter of the present D90 are dropped
+    mid = rec.mid_failure(8.0)
+    ratios = [s["d90"] / 4.0 for s in rec.snapshots]
+    assert abs(np.log(mid["d90"] / 4.0)) == pytest.approx(min(abs(np.log(r)) for r in ratios))
+    assert 4.0 / np.sqrt(2) <= mid["d90"] <= 4.0 * np.sqrt(2)
+    # the snapshot holds the positions of its row
+    d = np.linalg.norm(mid["x"][TOPO.triangles].mean(axis=1) - C0, axis=1)
+    assert d[RUNNER].max() == pytest.approx(mid["d90"], rel=1e-6)
+
+
+def test_the_record_survives_its_state_dict():
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = run_rows(rec)
+    again = MotionRecord(TOPO, threshold=0.1)
+    again.load_state_dict(rec.state_dict())
+    assert np.array_equal(again.locked(sim.state.x)["mask"], JAMMED)
+    assert len(again.snapshots) == len(rec.snapshots)
+    with pytest.raises(ValueError, match="triangles"):
+        MotionRecord(build_topology(structured_rectangle(2, 2, 2.0, 2.0))).load_state_dict(rec.state_dict())
+
+
+def test_bad_settings_are_refused():
+    for kw in ({"threshold": 0.0}, {"move_distance": -1.0}, {"locked_share": 1.0}):
+        with pytest.raises(ValueError):
+            MotionRecord(TOPO, **kw)
+
+
+def test_crack_breakdown_splits_rock_from_joints_and_activated_from_broken():
+    tag = np.array([0, 0, 0, 1, 1, 2])
+    broken = np.array([1, 0, 0, 1, 0, 0], bool)
+    mode = np.array([1, 0, 0, 2, 0, 0])
+    out = crack_breakdown(tag, np.array([0, 1, 3, 4]), broken, mode)  # ids: 0 and 3 are broken, 1 and 4 not
+    assert out["rock"] == {"n_elements": 3, "activated": 1, "broken": 1, "broken_by_mode": {"I": 1, "II": 0, "mixed": 0}}
+    assert out["joints"]["n_elements"] == 3 and out["joints"]["activated"] == 1 and out["joints"]["broken"] == 1
+    assert out["joints"]["broken_by_mode"]["II"] == 1
+    assert out["by_tag"]["2"]["activated"] == 0
+    with pytest.raises(ValueError, match="broken"):
+        crack_breakdown(tag, np.zeros(6, bool), broken[:3], mode)
+
+
+def stage(name, reason, max_displacement, reduction):
+    return StageResult(name=name, reason=reason, t_start=0.0, t_end=1.0, steps=10, wall_seconds=0.1, dt=1e-5,
+                       reduction=reduction, unbalanced_ratio=0.0, kinetic_energy=0.0, peak_kinetic_energy=0.0,
+                       max_speed=0.0, max_displacement=max_displacement, n_broken=0, detail="")
+
+
+@pytest.mark.parametrize("failing, runout, outcome", [
+    (("capped", 0.03), ("converged", 0.006), "crept"),  # 3.6 cm in all, at rest: the high-angle coarse slope
+    (("capped", 0.03), ("converged", 0.5), "failed"),  # ran on in the runout
+    (("capped", 0.03), ("capped", 0.006), "failed"),  # still moving when the runout's cap came
+    (("failed", 0.3), ("converged", 0.0), "failed"),  # the failing stage itself moved 1 % of the height
+])
+def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, runout, outcome):
+    stages = [stage("equilibrium", "converged", 1e-3, 1.0), stage("reduction_F1.667", "converged", 1e-3, 1.667),
+              stage("reduction_F2.000", failing[0], failing[1], 2.0)]
+    summary = {"stages": [s.as_dict() for s in stages], "fos": None, "failed_at_factor": 2.0, "outcome": "failed"}
+    result = stage("runout", runout[0], runout[1], 2.0)
+    summary["stages"].append(result.as_dict())
+    _tell_creep(summary, result, fail_displacement=0.3)
+    assert summary["outcome"] == outcome
+    fos = factor_of_safety_figures(summary)
+    if outcome == "crept":
+        assert summary["crept_at_factor"] == 2.0 and summary["failed_at_factor"] is None
+        assert summary["crept_m"] == pytest.approx(0.036)
+        assert fos["fos_bracket"] == [2.0, None] and fos["fos"] is None  # it stands at 2.0
+    else:
+        assert fos["fos_bracket"] == [1.667, 2.0]
+
+
+
+def thrown_block(out_dir=None):
+    """The checkpoint tests' 6 x 6 block thrown sideways, with a motion record of millimetres."""
+    from fdem.mesh.topology import build_topology as topology
+    from fdem.physics.crack_properties import CrackProperties
+    from fdem.physics.cracks import CrackSet
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+
+    topo = topology(structured_rectangle(6, 6, 0.6, 0.6))
+    model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
+    model.fix("bottom")
+    model.set_initial_velocity(vx=3.0, vy=0.0, where=np.flatnonzero(topo.x0[:, 1] > 0.35))
+    cracks = CrackSet(topo, {0: CrackProperties(f_t=2e5, c=4e5, phi=30.0, G_I=5.0, G_II=20.0, p_n=1e10)},
+                      parallel_min=0)
+    sim = Simulation(model, providers=[cracks], progress=False, out_dir=out_dir)
+    record = MotionRecord(topo, cracks, threshold=1e-4, move_distance=2e-5)
+    sim.add_monitor("failed_d90", record)
+    return sim, record
+
+
+def test_a_monitors_record_is_saved_with_a_checkpoint_and_a_new_monitor_gets_its_history_column(tmp_path):
+    from fdem.io.history import read_history
+    from fdem.solve.checkpoint import load_checkpoint, save_checkpoint
+
+    sim, record = thrown_block(tmp_path)
+    sim.run(n_steps=60, history_every=10, energy_tolerance=None, stage="runout")
+    assert np.isfinite(record.moved_time).any() and record.snapshots  # it moved and the ladder took snapshots
+    save_checkpoint(sim, tmp_path / "checkpoint.npz")
+    at_checkpoint = record.state_dict()
+    sim.run(n_steps=40, history_every=10, energy_tolerance=None, stage="runout")
+    sim.close()
+
+    again, rec2 = thrown_block(tmp_path)
+    again.add_monitor("extra", lambda s: 1.0)  # a monitor the checkpoint's run did not have
+    load_checkpoint(again, tmp_path / "checkpoint.npz")
+    again.continue_outputs()
+    assert np.array_equal(rec2.moved_time, at_checkpoint["moved_time"], equal_nan=True)
+    assert np.array_equal(rec2.anchor, at_checkpoint["anchor"])
+    again.run(n_steps=40, history_every=10, energy_tolerance=None, stage="runout")
+    again.close()
+    # the resumed record is the uninterrupted one's
+    assert np.array_equal(rec2.moved_time, record.moved_time)
+    assert np.array_equal(rec2.moved_d90, record.moved_d90)
+    assert [s["step"] for s in rec2.snapshots] == [s["step"] for s in record.snapshots]
+    h = read_history(tmp_path / "history.csv")
+    assert np.isnan(h["extra"][:7]).all() and np.all(h["extra"][7:] == 1.0)  # rows before the column: empty
+    assert np.all(np.diff(h["step"]) > 0)
