@@ -129,16 +129,17 @@ SIZE = 0.5
 
 
 def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
-          joint_offset: float | None = None, order: str | None = "hilbert"):
+          joint_offset: float | None = None, order: str | None = "hilbert", extents: dict | None = None):
     """Geometry, mesh and topology of one of the four slopes (``joint_offset``: where the
     persistent joints sit relative to the toe, :func:`four_slope_geometry`; ``order``: the mesh's
     memory order, :func:`fdem.mesh.triangulate.mesh_geometry`; ``None`` rebuilds the Gmsh-numbered
-    mesh of runs made before renumbering, whose checkpoints belong to it)."""
+    mesh of runs made before renumbering, whose checkpoints belong to it; ``extents``: ``toe_length``,
+    ``crest_length``, ``base_depth`` [m] of :func:`four_slope_geometry`)."""
     from fdem.mesh.triangulate import mesh_geometry
     from fdem.cases.four_slopes import four_slope_geometry
     from fdem.mesh.topology import build_topology
 
-    geometry = four_slope_geometry(angle, spacing, joint_offset=joint_offset)
+    geometry = four_slope_geometry(angle, spacing, joint_offset=joint_offset, **(extents or {}))
     mesh = mesh_geometry(geometry, size, refine_near_joints=refine, order=order)
     return geometry, mesh, build_topology(mesh)
 
@@ -188,16 +189,18 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
 
 
 def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
-          joint_offset: float | None = None, workflow=None) -> dict:
+          joint_offset: float | None = None, workflow=None, extents: dict | None = None) -> dict:
     """One of the four slopes as a scene file's contents (``fdem run four-slopes --write-scene
     FILE``): the outline, brick fabric, rock, the paper's crack table, contact, supports and
     ``workflow`` (a :class:`fdem.workflow.slope.SlopeWorkflow`) of :func:`build` and
     :func:`simulation`, so that ``fdem run FILE`` runs the same model."""
     import dataclasses
 
-    geo = four_slope_geometry(angle, spacing, joint_offset=joint_offset)
+    geo = four_slope_geometry(angle, spacing, joint_offset=joint_offset, **(extents or {}))
     fabric = geo.joint_sets[0]
     H = FOUR_SLOPE_HEIGHT
+    ext = {"crest_length": 2 * H, "toe_length": 3 * H, "base_depth": H}
+    ext.update({k: v for k, v in (extents or {}).items() if v is not None})
     cracks = {str(tag): {k: v for k, v in dataclasses.asdict(p).items() if v is not None}
               for tag, p in four_slope_property_sets().items()}
     wf = {}
@@ -208,8 +211,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
         "scene": {"name": f"four-slopes-{angle}-{spacing}", "size": size, "refine_near_joints": refine,
                   "description": f"the {angle}-angle {spacing} slope of the four-slope paper (docs/cases.md A)",
                   "min_joint_length": geo.min_joint_length},
-        "slope": {"kind": "simple", "height": H, "face_angle": FOUR_SLOPE_FACE_ANGLE, "crest_length": 2 * H,
-                  "toe_length": 3 * H, "base_depth": H},
+        "slope": {"kind": "simple", "height": H, "face_angle": FOUR_SLOPE_FACE_ANGLE, **ext},
         "joints": [{"kind": "brick", "name": fabric.name, "dip": fabric.dip, "spacing": fabric.spacing,
                     "offset": fabric.offset}],
         "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY},
@@ -230,6 +232,12 @@ def main(argv=None) -> dict:
                         help="persistent joints relative to the toe, a fraction of the spacing: 0 puts one "
                              "through the toe, 0.5 the toe midway (default: 0 fine, 0.5 coarse)")
     parser.add_argument("--refine", type=float, default=None, help="element size factor on joints, e.g. 0.5")
+    H = FOUR_SLOPE_HEIGHT
+    for name, default, what in (("crest-length", 2 * H, "crest plateau behind the face"),
+                                ("toe-length", 3 * H, "floor in front of the toe"),
+                                ("base-depth", H, "rock below the toe")):
+        parser.add_argument(f"--{name}", type=float, default=None, metavar="METRES",
+                            help=f"{what} [m] (default {default:g}; larger to show the boundaries take no part)")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
     parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
@@ -256,6 +264,10 @@ def main(argv=None) -> dict:
         parser.error(f"--refine (element size factor on joints) must lie in (0, 1], got {args.refine}")
     if args.joint_offset is not None and not (math.isfinite(args.joint_offset) and 0 <= args.joint_offset < 1):
         parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
+    extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth") if getattr(args, k) is not None}
+    for k, v in extents.items():
+        if not (math.isfinite(v) and v > 0):
+            parser.error(f"--{k.replace('_', '-')} must be a positive number of metres, got {v}")
     from fdem.workflow.slope import SlopeWorkflow
 
     try:  # the workflow's settings are checked now, not after hours of stages
@@ -270,7 +282,7 @@ def main(argv=None) -> dict:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
     if args.write_scene is not None:
         return write_case_scene(parser, NAME, scene(args.angle, spacing, args.size, args.refine, args.joint_offset,
-                                                    workflow), args.write_scene, argv)
+                                                    workflow, extents), args.write_scene, argv)
 
     from fdem.geometry.polygons import slope_toe
     from fdem.solve.checkpoint import save_checkpoint
@@ -280,7 +292,8 @@ def main(argv=None) -> dict:
     from fdem.workflow.slope import factor_of_safety_figures, run_slope_workflow
 
     try:
-        check_mesh_size(parser, four_slope_geometry(args.angle, spacing, joint_offset=args.joint_offset), args.size)
+        check_mesh_size(parser, four_slope_geometry(args.angle, spacing, joint_offset=args.joint_offset, **extents),
+                        args.size)
     except ValueError as err:  # a bad geometry option: say what is wrong, no traceback
         parser.error(str(err))
     open_run(parser, args, NAME)  # every option checked: now the folder and run.json
@@ -288,7 +301,8 @@ def main(argv=None) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine, args.joint_offset)
+            geometry, mesh, topo = build(args.angle, spacing, args.size, args.refine, args.joint_offset,
+                                         extents=extents)
         except ValueError as err:  # bad input: say what is wrong, no traceback
             parser.error(str(err))
     for w in caught:
@@ -314,6 +328,8 @@ def main(argv=None) -> dict:
     say("wrote " + ", ".join(map(str, written)))
     joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
     summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset,
+               "extents_m": {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
+                             "base_depth": FOUR_SLOPE_HEIGHT, **extents},
                "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
                "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
 

@@ -187,6 +187,31 @@ def test_four_slopes_writes_a_scene_that_checks(tmp_path):
     assert scene["joints"][0]["dip"] == 115.0 and scene["joints"][0]["spacing"] == 5.0
     assert scene["workflow"]["fos"] == [1.0, 2.0, 0.1]
     assert scene["cracks"][1]["k_t"] == 917e9  # the paper's tangential stiffness, not a penalty
+    assert (scene["slope"]["crest_length"], scene["slope"]["toe_length"], scene["slope"]["base_depth"]) == (30, 45, 15)
+
+
+def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_bad_extent(tmp_path, capsys):
+    """A wider model (the boundary check of docs/cases.md A) moves the boundaries, not the slope:
+    the toe, the face and the persistent joints through the toe stay where they were."""
+    from fdem.cases import four_slopes
+    from fdem.geometry.polygons import slope_toe
+
+    path = tmp_path / "wide.toml"
+    four_slopes.main(["--angle", "high", "--crest-length", "60", "--base-depth", "30", "--write-scene", str(path)])
+    scene = read_scene(path)
+    assert (scene["slope"]["crest_length"], scene["slope"]["base_depth"]) == (60, 30)
+    base = four_slopes.four_slope_geometry("high", "fine")
+    wide = four_slopes.four_slope_geometry("high", "fine", crest_length=60.0, base_depth=30.0)
+    (tx, ty), (wx, wy) = slope_toe(base.bodies[0]), slope_toe(wide.bodies[0])
+    assert wx == tx and wy == ty + 15.0  # the same toe, 15 m more rock below it
+    assert np.ptp(wide.bodies[0].vertices[:, 0]) == np.ptp(base.bodies[0].vertices[:, 0]) + 30.0
+    # the persistent joints keep their place relative to the toe
+    n = np.array([-np.sin(np.radians(115.0)), np.cos(np.radians(115.0))])
+    fb, fw = base.joint_sets[0], wide.joint_sets[0]
+    assert (fw.offset - n @ (wx, wy)) == pytest.approx(fb.offset - n @ (tx, ty))
+    with pytest.raises(SystemExit) as exit_:
+        four_slopes.main(["--base-depth", "0", "--out", str(tmp_path / "x")])
+    assert exit_.value.code == 2 and "--base-depth must be a positive number of metres" in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- a user's mesh
