@@ -34,7 +34,7 @@ from fdem.results.motion import MotionRecord, crack_status
 from fdem.io import animation, pictures
 from fdem.solve.simulation import Simulation
 
-__all__ = ["EQUILIBRIUM_STAGES", "RunReport", "fixed_body_triangles"]
+__all__ = ["EQUILIBRIUM_STAGES", "RunReport", "fixed_body_triangles", "output_cost"]
 
 
 EQUILIBRIUM_STAGES = ("equilibrium", "geostatic")
@@ -53,6 +53,20 @@ def fixed_body_triangles(model) -> np.ndarray:
     free_body = np.zeros(int(body.max(initial=-1)) + 1, bool)
     np.logical_or.at(free_body, body, ~fixed_node[topo.triangles].all(axis=1))
     return ~free_body[body]
+
+
+def output_cost(workflow: dict) -> dict:
+    """What a workflow's stages (and factor-of-safety trials) spent on output frames, history
+    rows and checkpoints, against their wall time: ``seconds`` by kind, ``wall_seconds`` and
+    ``share`` (the output's fraction of the wall time; None before any stage)."""
+    stages = list(workflow.get("stages") or []) + list((workflow.get("fos") or {}).get("trials") or [])
+    seconds = {"frames": 0.0, "history": 0.0, "checkpoints": 0.0}
+    wall = 0.0
+    for st in stages:
+        wall += float(st.get("wall_seconds") or 0.0)
+        for k, v in (st.get("output_seconds") or {}).items():
+            seconds[k] = seconds.get(k, 0.0) + float(v)
+    return {"seconds": seconds, "wall_seconds": wall, "share": sum(seconds.values()) / wall if wall > 0 else None}
 
 
 class RunReport:
@@ -170,6 +184,8 @@ class RunReport:
         }
         if extra:
             out.update(extra)
+            if isinstance(extra.get("workflow"), dict):
+                out["output_cost"] = output_cost(extra["workflow"])
         return jsonable(out)
 
     def _mid_failure_figures(self) -> dict | None:

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 import sys
+from time import perf_counter as _clock  # a clock for the output accounting (``time`` is a state variable here)
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -322,6 +323,9 @@ class Simulation:
         self._provider_terms: tuple[dict[str, float], bool] = ({}, True)
         self.last_row: dict | None = None
         self.kinetic_peak = 0.0  # largest kinetic energy of any step since the last history row
+        # wall seconds spent on what users read rather than on physics: output frames, history
+        # rows (ledger, monitors, history.csv) and checkpoints (fdem.workflow.journal adds those)
+        self.output_seconds = {"frames": 0.0, "history": 0.0, "checkpoints": 0.0}
         for p in providers:
             self.add_provider(p)
         self.dt = self._choose_dt()
@@ -771,6 +775,13 @@ class Simulation:
         return n
 
     def _record(self, sums, step: int, time: float) -> dict:
+        t0 = _clock()
+        try:
+            return self._record_row(sums, step, time)
+        finally:
+            self.output_seconds["history"] += _clock() - t0
+
+    def _record_row(self, sums, step: int, time: float) -> dict:
         early, late = work_halves(sums)
         terms, complete = self._provider_terms if self.providers else ({}, True)
         ledger = self.ledger.record(sums.kinetic, sums.strain, sums.gravity_moment, sums.external_moment,
@@ -1035,6 +1046,13 @@ class Simulation:
     def write_output(self) -> None:
         """Write one output frame of the current state: triangles VTU, crack VTU (with crack
         elements), contact VTU (with a contact set), optional PNG (``docs/outputs.md``)."""
+        t0 = _clock()
+        try:
+            self._write_frame()
+        finally:
+            self.output_seconds["frames"] += _clock() - t0
+
+    def _write_frame(self) -> None:
         self.sync_host()  # the GPU backend's state, mid-run
         if self.out_dir is None:
             self._frames += 1

@@ -102,7 +102,10 @@ class RunJournal:
 
         context = {"journal": 1, "done": self.done, "marks": self.marks,
                    "stage": None if self.current is None else self.current(), "why": why}
+        t0 = time.perf_counter()
         save_checkpoint(sim, self.path, context=context)
+        if hasattr(sim, "output_seconds"):
+            sim.output_seconds["checkpoints"] += time.perf_counter() - t0
         self.writes.append((why, int(sim.state.step)))
         return self.path
 

@@ -194,6 +194,9 @@ class StageResult:
     n_broken: int
     detail: str = ""
     period_stretch: float = 1.0
+    output_seconds: dict | None = None
+    """Wall seconds of the stage spent on output frames, history rows and checkpoints
+    (``Simulation.output_seconds``), against ``wall_seconds`` in all."""
 
     @property
     def converged(self) -> bool:
@@ -376,9 +379,14 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     def runtime() -> dict:  # what a checkpoint needs to continue this stage (fdem.workflow.journal)
         return {"name": stage.name, "t0": t0, "step0": step0, "n_total": n_total, "dt": dt, "x_start": x_start,
                 "ramp": None if ramp is None else list(ramp), "status": dict(status),
-                "wall_seconds": wall_before + time.perf_counter() - wall}
+                "wall_seconds": wall_before + time.perf_counter() - wall, "output_seconds": output_so_far()}
+
+    def output_so_far() -> dict:
+        return {k: output_before.get(k, 0.0) + sim.output_seconds[k] - output0[k] for k in output0}
 
     wall_before = float(saved.get("wall_seconds", 0.0)) if kind == "resume" else 0.0
+    output_before = dict(saved.get("output_seconds") or {}) if kind == "resume" else {}
+    output0 = dict(sim.output_seconds)
     wall = time.perf_counter()
     done = sim.state.step - step0
     if journal is not None:
@@ -409,7 +417,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
-        period_stretch=stretch)
+        period_stretch=stretch, output_seconds=output_so_far())
     if journal is not None:
         journal.stage_finished(sim, result.as_dict())
     return result

@@ -60,3 +60,8 @@ def test_run_report_after_failure_and_runout(tmp_path):
     assert data["locked"]["failed_area_m2"] == data["runout"]["displaced_area_m2"]
     assert 0 <= data["locked"]["area_m2"] <= data["locked"]["failed_area_m2"]
     assert sim.history[-1]["failed_d90"] == data["locked"]["d90_m"]
+    # what the stages spent on frames, history rows and checkpoints is booked, and is part of their wall time
+    cost = data["output_cost"]
+    assert cost["seconds"]["frames"] > 0 and cost["seconds"]["history"] > 0
+    assert 0 < cost["share"] < 1
+    assert cost["wall_seconds"] == sum(st["wall_seconds"] for st in summary["stages"])
