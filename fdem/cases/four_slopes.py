@@ -240,6 +240,10 @@ def main(argv=None) -> dict:
                             help=f"{what} [m] (default {default:g}; larger to show the boundaries take no part)")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
+    parser.add_argument("--tensile", choices=["reduced", "kept"], default=None,
+                        help="whether strength reduction divides the tensile strength f_t by F too (default: "
+                             "reduced with --reduction steps, kept with --reduction rate: the paper reduces the "
+                             "'cohesive and frictional strength')")
     parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
                         help="search the factor of safety in [LOWER, UPPER] to TOL first")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
@@ -264,6 +268,7 @@ def main(argv=None) -> dict:
         parser.error(f"--refine (element size factor on joints) must lie in (0, 1], got {args.refine}")
     if args.joint_offset is not None and not (math.isfinite(args.joint_offset) and 0 <= args.joint_offset < 1):
         parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
+    tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
     extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth") if getattr(args, k) is not None}
     for k, v in extents.items():
         if not (math.isfinite(v) and v > 0):
@@ -327,7 +332,7 @@ def main(argv=None) -> dict:
                                      title=f"{args.angle}-angle {args.spacing} slope: {topo.n_triangles} triangles"))
     say("wrote " + ", ".join(map(str, written)))
     joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
-    summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset,
+    summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset, "tensile": tensile,
                "extents_m": {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
                              "base_depth": FOUR_SLOPE_HEIGHT, **extents},
                "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
@@ -335,6 +340,7 @@ def main(argv=None) -> dict:
 
     if args.max_steps != 0:
         sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet)
+        cracks.interfaces.reduce_tensile = tensile == "reduced"
         stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
         toe_x, toe_y = slope_toe(geometry.bodies[0])
         run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)

@@ -400,3 +400,35 @@ def test_gravity_increase_matches_strength_reduction_for_frictionless_joints(tmp
     # still moving, as the search's failing trial was) and moves more than 1 % of its height (13 m)
     assert gravity["workflow"]["stages"][1]["reason"] in ("failed", "capped")
     assert gravity["runout"]["max_displacement_m"] >= 0.01 * 13.0
+
+
+@pytest.mark.parametrize("reduction, tensile", [("rate", "kept"), ("steps", "reduced")])
+def test_four_slopes_paper_schedule_keeps_the_tensile_strength(tmp_path, monkeypatch, reduction, tensile):
+    """The paper reduces the 'cohesive and frictional strength': its schedule (--reduction rate)
+    leaves f_t alone, the project's damped steps divide it by F too."""
+    from fdem.cases import four_slopes
+
+    built = {}
+    make = four_slopes.simulation
+
+    def keep(*args, **kwargs):
+        built["sim"], built["cracks"] = make(*args, **kwargs)
+        return built["sim"], built["cracks"]
+
+    monkeypatch.setattr(four_slopes, "simulation", keep)
+    # the rate stage begins after equilibrium (about 0.3 s here)
+    summary = four_slopes.main(["--spacing", "coarse", "--size", "2.5", "--reduction", reduction,
+                                "--max-time", "0.5" if reduction == "rate" else "0.001",
+                                "--no-pictures", "--quiet", "--out", str(tmp_path / reduction)])
+    assert summary["tensile"] == tensile
+    cracks = built["cracks"]
+    F = cracks.interfaces.reduction
+    f_t, c = cracks._element_strengths(F)[:2]
+    base_ft, base_c = cracks._element_strengths(1.0)[:2]
+    if reduction == "rate":
+        assert F > 1.0  # the strength fell during the run
+        np.testing.assert_array_equal(f_t, base_ft)
+        np.testing.assert_allclose(c, base_c / F)
+    else:
+        assert cracks.interfaces.reduce_tensile
+        np.testing.assert_allclose(cracks._element_strengths(1.25)[0], base_ft / 1.25)
