@@ -1,0 +1,165 @@
+"""Mesh convergence of the four slopes: the factor of safety (bisection and the damped 10 % steps),
+and, where the runs went to rest, the failed area, runout distance and kinetic energy.
+
+Each (scene, size) is one ``fdem run four-slopes`` run in ``<root>/<angle>_<spacing>_<size>``,
+started, resumed from its checkpoint (a run of hours cut by the end of a session goes on where
+it stopped) or, when its ``summary.json`` exists, only read. Runs go one after the other, one
+Numba thread each (two commands side by side use the two cores). The table of every finished run
+is printed and written to ``docs/cases/four_slopes_convergence.json``; ``--table-only`` runs
+nothing. A row whose figure moves by more than the bisection's tolerance from the next coarser
+size has not converged there.
+
+    # the bisection alone (runout skipped), sizes 1.0 to 0.5, both angles, fine spacing
+    nohup python cases/benchmarks/convergence_four_slopes.py --scenes low:fine high:fine \\
+        --sizes 1.0 0.7 0.5 --fos 1.0 3.0 0.04 --root runs/conv &
+    python cases/benchmarks/convergence_four_slopes.py --root runs/conv --table-only
+
+``--runout`` runs each failed slope on to rest (the workflow's runout stage, no cap beyond its
+own) instead of skipping it: the failed area, runout distance and the kinetic energy at rest.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = ROOT / "docs" / "cases" / "four_slopes_convergence.json"
+
+
+def folder(root: Path, angle: str, spacing: str, size: str) -> Path:
+    return root / f"{angle}_{spacing}_{size}"
+
+
+def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, resume: bool) -> list[str]:
+    """The ``fdem run four-slopes`` command of one run: with ``runout`` to rest and with pictures
+    (the mechanism at mid-failure and at rest), else the runout skipped and no pictures."""
+    exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
+    if resume:
+        return exe + ["--resume", str(out)]
+    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
+                  "--threads", "1", "--quiet", "--yes", "--out", str(out)]
+    return argv if runout else argv + ["--runout-time", "0.001", "--no-pictures"]
+
+
+def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool) -> None:
+    if (out / "summary.json").exists():
+        return
+    resume = (out / "checkpoint.npz").exists()
+    argv = command(out, angle, spacing, size, fos, runout, resume)
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out.parent / f"{out.name}.log", "a") as log:
+        print(("resuming " if resume else "starting ") + " ".join(argv[3:]), flush=True)
+        subprocess.run(argv, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, check=False)
+
+
+def row(summary: dict) -> dict:
+    """The convergence figures of one run's summary.json."""
+    wf = summary.get("workflow") or {}
+    fos = wf.get("fos") or {}
+    stable = [st["reduction"] for st in wf.get("stages", []) if st["reason"] == "converged"
+              and (st["name"].startswith("reduction") or st["name"] == "equilibrium")]
+    failed = wf.get("failed_at_factor")
+    runout_stage = next((st for st in wf.get("stages", []) if st["name"] == "runout"), None)
+    went_to_rest = runout_stage is not None and runout_stage["reason"] == "converged"
+    run = summary.get("runout", {})
+    tags = summary.get("cracks_by_tag") or {}
+    return {
+        "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
+        "fos_bisection": fos.get("fos"), "bisection_bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
+        "n_trials": fos.get("n_trials"),
+        "steps_bracket": [max(stable) if stable else None, failed], "outcome": summary.get("outcome"),
+        "runout_to_rest": went_to_rest,
+        "failed_area_m2": run.get("displaced_area_m2") if went_to_rest else None,
+        "runout_distance_m": run.get("runout_distance_m") if went_to_rest else None,
+        "max_displacement_m": run.get("max_displacement_m"),
+        "kinetic_peak_J_per_m": (summary.get("kinetic_energy") or {}).get("peak_J_per_m") if went_to_rest else None,
+        "kinetic_final_J_per_m": (summary.get("kinetic_energy") or {}).get("final_J_per_m") if went_to_rest else None,
+        "broken_rock": (tags.get("rock") or {}).get("broken"), "broken_joints": (tags.get("joints") or {}).get("broken"),
+        "locked_area_m2": (summary.get("locked") or {}).get("area_m2") if went_to_rest else None,
+        "steps": summary.get("steps"), "wall_seconds": summary.get("seconds_simulation"),
+    }
+
+
+def table(root: Path) -> list[dict]:
+    rows = []
+    for path in sorted(root.glob("*/summary.json")):
+        s = json.loads(path.read_text())
+        if s.get("case") == "four-slopes" and s.get("workflow"):
+            rows.append({**row(s), "folder": str(path.parent)})
+    rows.sort(key=lambda r: (r["scene"] or "", -(r["size_m"] or 0)))
+    return rows
+
+
+def fmt(v, spec=".3g") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, list):
+        return "-".join(fmt(x, ".4g") for x in v)
+    return format(v, spec) if isinstance(v, float) else str(v)
+
+
+def print_table(rows: list[dict]) -> None:
+    print("| scene | size | triangles | FoS (bisection) | bracket | steps bracket | outcome | failed area | runout | "
+          "KE peak | broken rock / joints | wall |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    prev = {}
+    for r in rows:
+        moved = ""
+        p = prev.get(r["scene"])
+        if p is not None and r["fos_bisection"] is not None and p["fos_bisection"] is not None:
+            moved = f" ({r['fos_bisection'] - p['fos_bisection']:+.3f})"
+        print(f"| {r['scene']} | {fmt(r['size_m'])} m | {fmt(r['n_triangles'])} | {fmt(r['fos_bisection'], '.3f')}{moved} | "
+              f"{fmt(r['bisection_bracket'])} | {fmt(r['steps_bracket'])} | {r['outcome']} | "
+              f"{fmt(r['failed_area_m2'])} | {fmt(r['runout_distance_m'])} | {fmt(r['kinetic_peak_J_per_m'])} | "
+              f"{fmt(r['broken_rock'])} / {fmt(r['broken_joints'])} | {fmt(r['wall_seconds'], '.0f')} s |")
+        prev[r["scene"]] = r
+
+
+def main(argv=None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", nargs="+", default=["low:fine", "high:fine", "low:coarse", "high:coarse"],
+                        help="angle:spacing pairs (default all four)")
+    parser.add_argument("--sizes", nargs="+", default=["1.0", "0.7", "0.5"],
+                        help="element sizes [m], as the run folders spell them (default 1.0 0.7 0.5)")
+    parser.add_argument("--fos", type=float, nargs=3, default=[1.0, 3.0, 0.04], metavar=("LOWER", "UPPER", "TOL"))
+    parser.add_argument("--runout", action="store_true", help="run each failed slope to rest (hours at fine sizes)")
+    parser.add_argument("--root", type=Path, default=Path("runs/convergence"))
+    parser.add_argument("--table-only", action="store_true", help="run nothing: the table of the finished runs")
+    args = parser.parse_args(argv)
+    scenes = []
+    for s in args.scenes:
+        angle, _, spacing = s.partition(":")
+        if angle not in ("low", "high") or spacing not in ("fine", "coarse"):
+            parser.error(f"--scenes takes angle:spacing with angle low|high and spacing fine|coarse, got {s!r}")
+        scenes.append((angle, spacing))
+    try:
+        if any(not float(size) > 0 for size in args.sizes):
+            raise ValueError
+    except ValueError:
+        parser.error(f"--sizes must be positive numbers of metres, got {args.sizes}")
+    lo, hi, tol = args.fos
+    if not (0 < lo < hi and 0 < tol < hi - lo):
+        parser.error(f"--fos needs 0 < LOWER < UPPER and 0 < TOL < UPPER - LOWER, got {args.fos}")
+    if not args.table_only:
+        for size in args.sizes:  # coarse to fine over all scenes: the cheap rows first
+            for angle, spacing in scenes:
+                run_one(folder(args.root, angle, spacing, size), angle, spacing, size, args.fos, args.runout)
+    rows = table(args.root)
+    print_table(rows)
+    TABLE.parent.mkdir(parents=True, exist_ok=True)
+    old = json.loads(TABLE.read_text()) if TABLE.exists() else {"rows": []}
+    keep = [r for r in old["rows"] if r["folder"] not in {x["folder"] for x in rows}]
+    TABLE.write_text(json.dumps({"command": "python cases/benchmarks/convergence_four_slopes.py "
+                                            + " ".join(sys.argv[1:] if argv is None else argv),
+                                 "rows": keep + rows}, indent=1))
+    print(f"wrote {TABLE}")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
