@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 
 from fdem.kernels.cache import refresh_kernel_cache as _refresh_kernel_cache
+from fdem.kernels.threading_layer import preload_tbb as _preload_tbb
 
 __version__ = "0.1.0"
 
@@ -73,3 +74,4 @@ def __dir__():
 # Numba's cache does not notice a changed helper in another file (fdem/kernels/cache.py):
 # start from a clean kernel cache whenever any kernel source changed.
 _refresh_kernel_cache()
+_preload_tbb()  # before the first parallel kernel: Numba's TBB layer, where pip installed TBB

@@ -75,8 +75,11 @@ SMALL_MESH_TRIANGLES = 20_000
 ``NUMBA_NUM_THREADS``) says otherwise: a step of a small mesh lasts well under a millisecond,
 the fork-join of each parallel kernel is a large part of it, and when another process shares
 the cores the threads' spin-waiting collapses it (quick-start scene, 1,503 triangles, load
-average 3 on 2 cores: 8.2 ms per damped step on 2 threads against 0.5-0.7 ms on 1;
-``docs/benchmarks.md``)."""
+average 3 on 2 cores: 8.2 ms per damped step on 2 threads against 0.5-0.7 ms on 1, GNU
+OpenMP). Under TBB (the layer ``import fdem`` sets up, :mod:`fdem.kernels.threading_layer`) a
+second thread gains 1.87x at 22,600 triangles on an idle machine and loses 13 % beside another
+job, and gains 1.75x and 1.46x at 180,000 (``cases/benchmarks/bench_threads.py``,
+``docs/benchmarks.md``, "Threads on a shared machine")."""
 
 
 def case_parser(doc: str | None, out: str, size: float | None, size_help: str,
