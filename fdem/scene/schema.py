@@ -174,7 +174,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "runout_time": _f("cap of the runout stage [s] (default from the height)", **POSITIVE),
         "rest_kinetic_ratio": _f("kinetic energy over its peak that counts as rest [-]", 0.01, low=0.0, high=1.0,
                                  open_low=True, open_high=True),
-        "runout_dt_fraction": _f("time-step factor of the runout [-]", 0.4, **FRACTION),
+        "runout_dt_fraction": _f("time-step factor of the runout [-]", 0.8, **FRACTION),
         "dt_fraction": _f("time-step factor of the other stages [-]", 0.8, **FRACTION),
         "density_scaling": _f("added-mass budget of the quasi-static stages, a fraction of the mass [-]", 0.01,
                               low=0.0, high=1.0),

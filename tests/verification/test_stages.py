@@ -11,7 +11,7 @@ import pytest
 from fdem.solve.damping import Damping, NO_DAMPING
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import fundamental_damping
-from fdem.workflow.slope import SlopeWorkflow, reduction_steps, run_slope_workflow
+from fdem.workflow.slope import SlopeWorkflow, reduction_steps, run_slope_workflow, runout_stage
 
 from conftest import PLANAR_SIZE, planar_slope_scene
 
@@ -44,7 +44,8 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     r = run_stage(s.sim, Stage("default", duration=0.05 * T, damping=fundamental_damping(s.sim),
                                density_scaling=False), frames=False)
     assert r.dt == pytest.approx(0.8 * crit)
-    assert SlopeWorkflow().runout_dt_fraction == 0.4
+    # the workflow's runout stage runs at the workflow's factor
+    assert runout_stage(SlopeWorkflow(runout_dt_fraction=0.4), T, 10.0, 9.81).dt_fraction == 0.4
     # a user step above the critical one is refused, and the simulation keeps its own factor
     s.sim.user_dt = 2.0 * crit
     with pytest.raises(ValueError, match="exceeds the stable time step"):
