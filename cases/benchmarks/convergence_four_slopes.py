@@ -14,8 +14,10 @@ size has not converged there.
         --sizes 1.0 0.7 0.5 --fos 1.0 3.0 0.04 --root runs/conv &
     python cases/benchmarks/convergence_four_slopes.py --root runs/conv --table-only
 
-``--runout`` runs each failed slope on to rest (the workflow's runout stage, no cap beyond its
-own) instead of skipping it: the failed area, runout distance and the kinetic energy at rest.
+``--runout`` runs each failed slope on to rest (the workflow's runout stage, capped at
+``--runout-time``, 60 s by default: in effect no cap) instead of skipping it: the failed area,
+runout distance and the kinetic energy at rest, with the pictures (``mechanism.png``: the
+activated and broken crack elements at mid-failure and at rest).
 """
 from __future__ import annotations
 
@@ -34,7 +36,8 @@ def folder(root: Path, angle: str, spacing: str, size: str) -> Path:
     return root / f"{angle}_{spacing}_{size}"
 
 
-def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, resume: bool) -> list[str]:
+def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, resume: bool,
+            runout_time: float = 60.0) -> list[str]:
     """The ``fdem run four-slopes`` command of one run: with ``runout`` to rest and with pictures
     (the mechanism at mid-failure and at rest), else the runout skipped and no pictures."""
     exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
@@ -42,14 +45,14 @@ def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, r
         return exe + ["--resume", str(out)]
     argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
                   "--threads", "1", "--quiet", "--yes", "--out", str(out)]
-    return argv if runout else argv + ["--runout-time", "0.001", "--no-pictures"]
+    return argv + ["--runout-time", str(runout_time)] if runout else argv + ["--runout-time", "0.001", "--no-pictures"]
 
 
-def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool) -> None:
+def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, runout_time: float = 60.0) -> None:
     if (out / "summary.json").exists():
         return
     resume = (out / "checkpoint.npz").exists()
-    argv = command(out, angle, spacing, size, fos, runout, resume)
+    argv = command(out, angle, spacing, size, fos, runout, resume, runout_time)
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.parent / f"{out.name}.log", "a") as log:
@@ -128,6 +131,10 @@ def main(argv=None) -> list[dict]:
                         help="element sizes [m], as the run folders spell them (default 1.0 0.7 0.5)")
     parser.add_argument("--fos", type=float, nargs=3, default=[1.0, 3.0, 0.04], metavar=("LOWER", "UPPER", "TOL"))
     parser.add_argument("--runout", action="store_true", help="run each failed slope to rest (hours at fine sizes)")
+    parser.add_argument("--runout-time", type=float, default=60.0, metavar="SECONDS",
+                        help="with --runout: the cap of the runout stage [s simulated] (default 60: in effect none, "
+                             "the stage ends when the kinetic energy has stayed below 1 %% of its peak for one "
+                             "response time)")
     parser.add_argument("--root", type=Path, default=Path("runs/convergence"))
     parser.add_argument("--table-only", action="store_true", help="run nothing: the table of the finished runs")
     args = parser.parse_args(argv)
@@ -148,7 +155,8 @@ def main(argv=None) -> list[dict]:
     if not args.table_only:
         for size in args.sizes:  # coarse to fine over all scenes: the cheap rows first
             for angle, spacing in scenes:
-                run_one(folder(args.root, angle, spacing, size), angle, spacing, size, args.fos, args.runout)
+                run_one(folder(args.root, angle, spacing, size), angle, spacing, size, args.fos, args.runout,
+                        args.runout_time)
     rows = table(args.root)
     print_table(rows)
     TABLE.parent.mkdir(parents=True, exist_ok=True)
