@@ -34,6 +34,7 @@ import time
 import warnings
 from pathlib import Path
 
+import numba
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -75,7 +76,7 @@ def run_one(size: float, setting: str, tail: float) -> list[dict]:
     for row in rows[:: max(1, len(rows) // 12)] + rows[-1:]:
         print(f"   step {row['step']:>7d}  t {row['time']:.4f} s  R {row['unbalanced_ratio']:.3e}  "
               f"kinetic {row['kinetic']:.3e} J/m  fracture {row['fracture']:.4g} J/m  inelastic {row['inelastic']:.0f}")
-    common = dict(mesh_size=int(topo.n_triangles), threads=1, setting=setting, element_size_m=size)
+    common = dict(mesh_size=int(topo.n_triangles), threads=numba.get_num_threads(), setting=setting, element_size_m=size)
     recs = [
         record("equilibrium stage steps", float(result.steps), "steps", reason=result.reason, **common),
         record("equilibrium stage simulated time", float(result.t_end - result.t_start), "s", **common),
@@ -112,7 +113,7 @@ def residual_map(size: float, checkpoint: str, steps: int) -> list[dict]:
         geometry, _, topo = build("low", "fine", size)
     sim, cracks = simulation(geometry, topo, None, pictures=False, progress=False)
     load_checkpoint(sim, checkpoint)
-    common = dict(mesh_size=int(topo.n_triangles), threads=1, element_size_m=size, checkpoint=str(checkpoint),
+    common = dict(mesh_size=int(topo.n_triangles), threads=numba.get_num_threads(), element_size_m=size, checkpoint=str(checkpoint),
                   step=int(sim.state.step))
     ratio, floor = unbalanced_force_ratio(sim), unbalanced_ratio_floor(sim)
     f = np.linalg.norm(unbalanced_forces(sim), axis=1)
