@@ -14,7 +14,8 @@ size has not converged there.
         --sizes 1.0 0.7 0.5 --fos 1.0 3.0 0.04 --root runs/conv &
     python cases/benchmarks/convergence_four_slopes.py --root runs/conv --table-only
 
-``--runout`` runs each failed slope on to rest (the workflow's runout stage, capped at
+A root's finished runs are only read: give ``--runout`` its own root (``runs/rest``), or a
+bisection-only run there would be taken as done. ``--runout`` runs each failed slope on to rest (the workflow's runout stage, capped at
 ``--runout-time``, 60 s by default: in effect no cap) instead of skipping it: the failed area,
 runout distance and the kinetic energy at rest, with the pictures (``mechanism.png``: the
 activated and broken crack elements at mid-failure and at rest).
@@ -67,6 +68,8 @@ def row(summary: dict) -> dict:
     stable = [st["reduction"] for st in wf.get("stages", []) if st["reason"] == "converged"
               and (st["name"].startswith("reduction") or st["name"] == "equilibrium")]
     failed = wf.get("failed_at_factor")
+    if wf.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
+        stable.append(wf["crept_at_factor"])
     runout_stage = next((st for st in wf.get("stages", []) if st["name"] == "runout"), None)
     went_to_rest = runout_stage is not None and runout_stage["reason"] == "converged"
     run = summary.get("runout", {})

@@ -189,7 +189,8 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
 
 
 def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
-          joint_offset: float | None = None, workflow=None, extents: dict | None = None) -> dict:
+          joint_offset: float | None = None, workflow=None, extents: dict | None = None,
+          tensile: str | None = None) -> dict:
     """One of the four slopes as a scene file's contents (``fdem run four-slopes --write-scene
     FILE``): the outline, brick fabric, rock, the paper's crack table, contact, supports and
     ``workflow`` (a :class:`fdem.workflow.slope.SlopeWorkflow`) of :func:`build` and
@@ -207,6 +208,8 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
     if workflow is not None:
         wf = {"reduction": workflow.reduction, "fos": list(workflow.fos) if workflow.fos else None,
               "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction}
+    if tensile is not None:
+        wf["reduce_tensile"] = tensile == "reduced"
     return {
         "scene": {"name": f"four-slopes-{angle}-{spacing}", "size": size, "refine_near_joints": refine,
                   "description": f"the {angle}-angle {spacing} slope of the four-slope paper (docs/cases.md A)",
@@ -269,7 +272,19 @@ def main(argv=None) -> dict:
         parser.error(f"--refine (element size factor on joints) must lie in (0, 1], got {args.refine}")
     if args.joint_offset is not None and not (math.isfinite(args.joint_offset) and 0 <= args.joint_offset < 1):
         parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
+    # a run keeps the settings it began with: a resumed run's run.json names them (written below),
+    # and one begun before they were written there ran with the defaults of then
+    resuming = getattr(args, "resume", None) is not None
+    began_with = list(args.run_record.get("argv", [])) + list(args.run_record.get("resumed_with", []))
+    if resuming and "--tensile" not in began_with:
+        args.tensile = "reduced"  # f_t was divided by F in every mode before --tensile existed
+    if resuming and "--runout-dt-fraction" not in began_with:
+        args.runout_dt_fraction = 0.4  # the runout's factor before it became 0.8
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
+    if not resuming:
+        args.run_record["argv"] = list(args.run_record["argv"]) + [
+            a for flag, value in (("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)))
+            if flag not in args.run_record["argv"] for a in (flag, value)]
     extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth") if getattr(args, k) is not None}
     for k, v in extents.items():
         if not (math.isfinite(v) and v > 0):
@@ -288,7 +303,7 @@ def main(argv=None) -> dict:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
     if args.write_scene is not None:
         return write_case_scene(parser, NAME, scene(args.angle, spacing, args.size, args.refine, args.joint_offset,
-                                                    workflow, extents), args.write_scene, argv)
+                                                    workflow, extents, tensile), args.write_scene, argv)
 
     from fdem.geometry.polygons import slope_toe
     from fdem.solve.checkpoint import save_checkpoint

@@ -19,14 +19,18 @@ class HistoryWriter:
         self.columns: list[str] | None = None if columns is None else list(columns)
         self._fh = None
         self._writer = None
+        self._started = False
 
     def write(self, row: dict) -> None:
         if self._fh is None:
             if self.columns is None:
                 self.columns = list(row)
-            self._fh = open(self.path, "w", newline="")
+            # the first row writes the header; a row after close() appends, never truncates
+            self._fh = open(self.path, "a" if self._started else "w", newline="")
             self._writer = csv.writer(self._fh)
-            self._writer.writerow(self.columns)
+            if not self._started:
+                self._writer.writerow(self.columns)
+            self._started = True
         extra = [k for k in row if k not in self.columns]
         if extra:
             raise ValueError(f"history row has columns {extra} that the header {self.columns} lacks")

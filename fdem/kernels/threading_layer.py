@@ -49,7 +49,8 @@ def preload_tbb() -> bool:
     """Load TBB's library for Numba (see the module docstring); True when it is loaded."""
     if _LOADED:
         return True
-    if os.environ.get("NUMBA_THREADING_LAYER", "default").lower() not in ("default", "tbb", "safe"):
+    if os.environ.get("NUMBA_THREADING_LAYER", "default").lower() not in ("default", "tbb", "safe", "threadsafe",
+                                                                          "forksafe"):
         return False
     path = tbb_library()
     if path is None:

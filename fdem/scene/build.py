@@ -123,6 +123,9 @@ def build_simulation(s: dict, topology, out_dir=None, pictures: bool = True, pro
                           contact_penalty=c["penalty"])
     except ValueError as err:
         raise SceneError(f"{where}: [cracks]: {err}") from None
+    w = s["workflow"]
+    cracks.interfaces.reduce_tensile = (w["reduce_tensile"] if w["reduce_tensile"] is not None
+                                        else w["reduction"] != "rate")
     start = geostatic_start(model, cracks) if s["start"]["kind"] == "static" else None
     contact = ContactSet(topology, c["penalty"], friction_angle=c["friction_angle"], mass=model.node_mass(),
                          cracks=cracks, damping_ratio=c["damping_ratio"])

@@ -364,7 +364,7 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
             if summary["outcome"] == "failed" and toe is not None:
                 r = runout(sim.model.topology, sim.state.x, toe)
                 row["runout_distance_m"], row["runout_volume_m2"] = r["runout_distance_m"], r["runout_volume_m2"]
-            elif summary["outcome"] == "stable":
+            elif summary["outcome"] in ("stable", "crept"):  # crept a little and came to rest: no runout
                 row["runout_distance_m"], row["runout_volume_m2"] = 0.0, 0.0
     except Exception as exc:  # noqa: BLE001 - any failure of one realization is data, not the end
         row["status"] = "error"

@@ -306,7 +306,9 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     runout having moved less than the failure displacement (1 % of the height) crept and
     stopped: it did not fail at that factor. Its outcome is ``crept``; ``crept_at_factor`` is
     the factor, ``failed_at_factor`` goes back to None, and the reduction-step bracket reads it
-    as a factor the slope stands at (:func:`factor_of_safety_figures`). The creep is bounded by
+    as a factor the slope stands at (:func:`factor_of_safety_figures`): the bracket is then
+    ``[F, None]``, open above, since the reduction stopped there and no larger factor was tried
+    (carrying the steps on from the resting state is not built). The creep is bounded by
     the sum of the two stages' largest node displacements."""
     if runout.reason != "converged" or len(summary["stages"]) < 2:
         return
@@ -321,8 +323,10 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     summary["crept_at_factor"] = factor
     summary["failed_at_factor"] = None
     summary["crept_m"] = creep
-    summary["ending"] = (f"crept at most {creep:.3g} m at F = {factor:.4g} and came to rest: no failure "
-                         f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height)")
+    summary["ending"] = (f"crept at most {creep:.3g} m at F = {factor:.4g} and came to rest: no failure there "
+                         f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height); the "
+                         f"reduction stopped at that factor, so larger factors were not tried: the factor of "
+                         f"safety is at least {factor:.4g} (search it with fos = (lower, upper, tol))")
 
 
 def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:

@@ -421,6 +421,12 @@ def test_four_slopes_paper_schedule_keeps_the_tensile_strength(tmp_path, monkeyp
                                 "--max-time", "0.5" if reduction == "rate" else "0.001",
                                 "--no-pictures", "--quiet", "--out", str(tmp_path / reduction)])
     assert summary["tensile"] == tensile
+    # the run keeps the settings it began with, and its scene file says the same
+    saved = json.loads((tmp_path / reduction / "run.json").read_text())["argv"]
+    assert saved[saved.index("--tensile") + 1] == tensile and "--runout-dt-fraction" in saved
+    four_slopes.main(["--spacing", "coarse", "--size", "2.5", "--reduction", reduction,
+                      "--write-scene", str(tmp_path / f"{reduction}.toml")])
+    assert read_scene(tmp_path / f"{reduction}.toml")["workflow"]["reduce_tensile"] is (tensile == "reduced")
     cracks = built["cracks"]
     F = cracks.interfaces.reduction
     f_t, c = cracks._element_strengths(F)[:2]

@@ -153,6 +153,7 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
         assert summary["crept_at_factor"] == 2.0 and summary["failed_at_factor"] is None
         assert summary["crept_m"] == pytest.approx(0.036)
         assert fos["fos_bracket"] == [2.0, None] and fos["fos"] is None  # it stands at 2.0
+        assert "larger factors were not tried" in summary["ending"]
     else:
         assert fos["fos_bracket"] == [1.667, 2.0]
 
@@ -206,3 +207,16 @@ def test_a_monitors_record_is_saved_with_a_checkpoint_and_a_new_monitor_gets_its
     h = read_history(tmp_path / "history.csv")
     assert np.isnan(h["extra"][:7]).all() and np.all(h["extra"][7:] == 1.0)  # rows before the column: empty
     assert np.all(np.diff(h["step"]) > 0)
+
+
+def test_the_history_file_is_never_truncated_by_a_row_after_close(tmp_path):
+    from fdem.io.history import HistoryWriter, read_history
+
+    w = HistoryWriter(tmp_path / "h.csv")
+    for k in range(3):
+        w.write({"step": k, "time": 0.1 * k})
+    w.close()
+    for k in range(3, 5):
+        w.write({"step": k, "time": 0.1 * k})
+    w.close()
+    assert list(read_history(tmp_path / "h.csv")["step"]) == [0, 1, 2, 3, 4]
