@@ -82,7 +82,8 @@ FOUR_SLOPE_SPACING = {"fine": 1.0, "coarse": 5.0}
 
 def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_length: float | None = None,
                      crest_length: float | None = None, base_depth: float | None = None,
-                     min_joint_length: float = 0.05, joint_offset: float | None = None) -> Geometry:
+                     min_joint_length: float = 0.05, joint_offset: float | None = None,
+                     boundary_band: float | None = None) -> Geometry:
     """The jointed slopes of cases.md A (seed 002): H = 15 m, face 45 deg, brick fabric.
 
     ``angle`` is ``"low"`` (persistent joints at 15 deg, inclined) or ``"high"`` (115 deg,
@@ -98,6 +99,8 @@ def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_l
     its thick layers (0.5). Default: 0 for ``"fine"``, 0.5 for ``"coarse"`` and 0 for a number.
 
     Assumed (the paper gives no extents): toe floor 3 H, crest plateau 2 H, base H below the toe.
+    ``boundary_band`` [m]: keep the joints out of bands of intact rock that wide along the left
+    and right boundaries (:class:`fdem.geometry.joint_sets.BandedSet`).
     """
     if angle not in FOUR_SLOPE_JOINT_DIP:
         raise ValueError(f"angle must be 'low' or 'high', got {angle!r}")
@@ -117,6 +120,10 @@ def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_l
         raise ValueError(f"joint_offset must be a fraction of the spacing in [0, 1), got {joint_offset!r}")
     offset = toe[0] * n[0] + toe[1] * n[1] + joint_offset * s
     fabric = BrickSet(dip=dip, spacing=s, offset=offset, name=f"{angle}-angle brick fabric")
+    if boundary_band is not None:
+        from fdem.geometry.joint_sets import BandedSet
+
+        fabric = BandedSet(fabric, boundary_band)
     return Geometry([slope], [fabric], min_joint_length=min_joint_length)
 
 
@@ -241,6 +248,9 @@ def main(argv=None) -> dict:
                                 ("base-depth", H, "rock below the toe")):
         parser.add_argument(f"--{name}", type=float, default=None, metavar="METRES",
                             help=f"{what} [m] (default {default:g}; larger to show the boundaries take no part)")
+    parser.add_argument("--boundary-band", type=float, default=None, metavar="METRES",
+                        help="keep the joints out of bands of intact rock this wide along the left and right "
+                             "boundaries (default none), so that slip at the rollers is not part of the mechanism")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
     parser.add_argument("--tensile", choices=["reduced", "kept"], default=None,
@@ -285,7 +295,11 @@ def main(argv=None) -> dict:
         args.run_record["argv"] = list(args.run_record["argv"]) + [
             a for flag, value in (("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)))
             if flag not in args.run_record["argv"] for a in (flag, value)]
-    extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth") if getattr(args, k) is not None}
+    extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth", "boundary_band")
+               if getattr(args, k) is not None}
+    if "boundary_band" in extents and args.write_scene is not None:
+        parser.error("--boundary-band cannot be written into a scene file yet (scene files have no joint bands); "
+                     "run the case itself")
     for k, v in extents.items():
         if not (math.isfinite(v) and v > 0):
             parser.error(f"--{k.replace('_', '-')} must be a positive number of metres, got {v}")

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 import numpy as np
 
-__all__ = ["PersistentSet", "IntermittentSet", "BrickSet", "SegmentSet", "StochasticSet"]
+__all__ = ["PersistentSet", "IntermittentSet", "BrickSet", "SegmentSet", "StochasticSet", "BandedSet", "clip_to_x"]
 
 
 def _check_dip(dip: float, where: str) -> None:
@@ -251,3 +251,48 @@ class StochasticSet:
         a = np.radians(self._dips(rng))
         half = 0.5 * lengths[:, None] * np.column_stack([np.cos(a), np.sin(a)])
         return np.stack([centres - half, centres + half], axis=1)
+
+
+def clip_to_x(segments: np.ndarray, x_low: float, x_high: float) -> np.ndarray:
+    """The parts of ``segments`` (n, 2, 2) [m] with ``x_low <= x <= x_high``; segments wholly
+    outside the band are dropped. A vertical segment is kept whole or dropped."""
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 2, 2)
+    a, b = seg[:, 0], seg[:, 1]
+    dx = b[:, 0] - a[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_low = np.where(dx != 0.0, (x_low - a[:, 0]) / dx, np.where(a[:, 0] >= x_low, -np.inf, np.inf))
+        t_high = np.where(dx != 0.0, (x_high - a[:, 0]) / dx, np.where(a[:, 0] <= x_high, np.inf, -np.inf))
+    t0 = np.maximum(0.0, np.where(dx >= 0.0, t_low, t_high))
+    t1 = np.minimum(1.0, np.where(dx >= 0.0, t_high, t_low))
+    keep = t1 > t0
+    d = b - a
+    return np.stack([a[keep] + t0[keep, None] * d[keep], a[keep] + t1[keep, None] * d[keep]], axis=1)
+
+
+@dataclass(frozen=True)
+class BandedSet:
+    """A joint set kept out of bands of intact rock along the model's left and right sides:
+    its joints only where ``x_low + band <= x <= x_high - band`` (``x_low``, ``x_high`` the
+    domain's bounds). Lateral boundaries of a jointed model (rollers) would otherwise hold
+    wedges cut by joints that meet them, and slip there belongs to the boundary, not to the
+    slope (``docs/cases.md`` A, the high-angle slopes); an intact band keeps the boundary out
+    of the mechanism. ``band`` [m] is the width of each band.
+    """
+
+    joints: object
+    band: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.band) and self.band > 0):
+            raise ValueError(f"band must be a positive width [m], got {self.band!r}")
+
+    @property
+    def name(self) -> str:
+        return f"{getattr(self.joints, 'name', 'joints')} (intact {self.band:g} m bands at the sides)"
+
+    def raw_segments(self, bounds) -> np.ndarray:
+        x0, _, x1, _ = bounds
+        if x1 - x0 <= 2.0 * self.band:
+            raise ValueError(f"joint set {self.name!r}: bands of {self.band:g} m leave no room in a domain "
+                             f"{x1 - x0:g} m wide")
+        return clip_to_x(self.joints.raw_segments(bounds), x0 + self.band, x1 - self.band)

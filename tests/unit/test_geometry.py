@@ -234,3 +234,24 @@ def test_disc_area():
     assert d.area == pytest.approx(32 * 0.25 * math.sin(2 * math.pi / 64), rel=1e-14)
     with pytest.raises(ValueError, match="radius must be positive"):
         disc((0, 0), 0.0)
+
+
+def test_a_banded_joint_set_keeps_its_joints_out_of_the_side_bands():
+    """clip_to_x cuts segments at the band's edges exactly; a BandedSet's joints (and so the
+    mesh's) lie only between the bands, each piece on its parent joint."""
+    from fdem.geometry.joint_sets import BandedSet, BrickSet, clip_to_x
+
+    seg = np.array([[[-1.0, 0.0], [3.0, 4.0]], [[5.0, 0.0], [6.0, 1.0]], [[1.0, -1.0], [1.0, 1.0]]])
+    out = clip_to_x(seg, 0.0, 2.0)
+    np.testing.assert_allclose(out, [[[0.0, 1.0], [2.0, 3.0]], [[1.0, -1.0], [1.0, 1.0]]])
+    np.testing.assert_allclose(clip_to_x(seg[:1, ::-1], 0.0, 2.0), [[[2.0, 3.0], [0.0, 1.0]]])  # either direction
+    fabric = BrickSet(dip=115.0, spacing=1.0)
+    banded = BandedSet(fabric, 5.0)
+    bounds = (0.0, 0.0, 40.0, 20.0)
+    pieces = banded.raw_segments(bounds)
+    assert pieces[:, :, 0].min() >= 5.0 - 1e-12 and pieces[:, :, 0].max() <= 35.0 + 1e-12
+    assert len(pieces) > 0
+    with pytest.raises(ValueError, match="band must be a positive"):
+        BandedSet(fabric, 0.0)
+    with pytest.raises(ValueError, match="leave no room"):
+        BandedSet(fabric, 25.0).raw_segments(bounds)
