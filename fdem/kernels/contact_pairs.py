@@ -1045,19 +1045,6 @@ def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broke
             if crack >= 0:
                 mu_base[q] = crack_friction(crack, broken, crack_mu, mu_base[q])
     return mu_base, kt_pair, damp_pair
-    crack = np.empty(n, np.int64)  # the merge in a pass of its own keeps the constants' loop simple
-    r = 0
-    last = -1
-    for q in range(n):
-        key = pair_i[q] * n_tri + pair_j[q]
-        if key < last:
-            r = lower_bound(crack_keys, key)
-        crack[q], r = crack_between(key, crack_keys, crack_order, r)
-        last = key
-    for q in range(n):
-        pair_constants_one(q, pair_i, pair_j, crack[q], mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
-                           mu_base, kt_pair, damp_pair)
-    return mu_base, kt_pair, damp_pair
 
 
 @njit(cache=True, error_model="numpy", inline="always")
