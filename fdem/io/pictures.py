@@ -310,7 +310,7 @@ def mechanism_frames(path: str | os.PathLike | None, triangles, crack_nodes, pan
 
     Each panel is a dict with ``x`` (n_nodes, 2) positions [m], ``displacement`` (n_tri,) or
     (n_nodes,) magnitude [m], ``status`` (n_crack,) 0 intact, 1 activated (past its elastic range,
-    slipping or softening, unbroken), 2 broken (:func:`fdem.results.motion.crack_status`) and a
+    and slipped or opened by more than 1 mm, unbroken), 2 broken (:func:`fdem.results.motion.crack_status`) and a
     ``title``. Activated crack elements are drawn thin black, broken ones thick black, intact
     joints (``joint``, (n_crack,) bool) thin light grey; the colour scale is shared by all panels
     (up to the largest displacement). ``locked`` (n_tri,) bool with ``crack_triangles`` (n_crack,

@@ -171,7 +171,7 @@ class RunReport:
                                "fracture_J_per_m": float(hist[-1].get("fracture", 0.0)) if hist else 0.0},
             "cracks": {"broken": int(cracks.broken.sum()), "inelastic": int(cracks.n_inelastic()),
                        "by_mode": {m: int((modes == m).sum()) for m in ("I", "II", "mixed")}},
-            "cracks_by_tag": analysis.crack_breakdown(topo.crack_tag, cracks.inelastic(), cracks.broken,
+            "cracks_by_tag": analysis.crack_breakdown(topo.crack_tag, crack_status(cracks, x) > 0, cracks.broken,
                                                       cracks.failure_mode),
             "locked": {k: v for k, v in self.motion.locked(x).items() if k != "mask"},
             "mid_failure": self._mid_failure_figures(),
@@ -207,7 +207,7 @@ class RunReport:
             panels.append({"x": xs, "displacement": analysis.triangle_displacement(topo, xs), "status": snap["status"],
                            "title": f"mid-failure, t = {snap['time']:.3g} s: the failed mass's D90 "
                                     f"{snap['d90']:.3g} m of its final {final:.3g} m"})
-        panels.append({"x": x, "displacement": analysis.triangle_displacement(topo, x), "status": crack_status(self.cracks),
+        panels.append({"x": x, "displacement": analysis.triangle_displacement(topo, x), "status": crack_status(self.cracks, x),
                        "title": (f"end of the run, t = {sim.state.time:.3g} s"
                                  + (f"; locked part {locked['area_m2']:.3g} m$^2$ "
                                     f"({100 * locked['share_of_failed']:.0f} % of the failed mass)"

@@ -220,3 +220,38 @@ def test_the_history_file_is_never_truncated_by_a_row_after_close(tmp_path):
         w.write({"step": k, "time": 0.1 * k})
     w.close()
     assert list(read_history(tmp_path / "h.csv")["step"]) == [0, 1, 2, 3, 4]
+
+
+def test_an_element_is_activated_only_once_it_has_slipped_or_opened_a_millimetre():
+    """crack_status: broken > activated (inelastic, and its faces 1 mm or more apart along or across
+    the element) > intact; an inelastic element that yielded by micrometres stays intact."""
+    from fdem.results.motion import ACTIVATED, BROKEN, INTACT, crack_status
+
+    cn = TOPO.crack_nodes
+    e, used = [], set()  # five elements of which no two share a triangle, so each is moved alone
+    for c in range(TOPO.n_cracks):
+        tris = set(TOPO.crack_triangles[c])
+        if not tris & used:
+            e.append(c)
+            used |= tris
+        if len(e) == 5:
+            break
+
+    class Cracks:
+        nodes = cn
+        broken = np.zeros(TOPO.n_cracks, bool)
+
+        def inelastic(self):
+            return np.array(e[:4])
+
+    cracks = Cracks()
+    cracks.broken[e[3]] = True
+    x = TOPO.x0.copy()
+    t = x[cn[:, 1]] - x[cn[:, 0]]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    x[cn[e[0], 2:]] += 2e-3 * t[e[0]]                                      # slipped 2 mm
+    x[cn[e[1], 2:]] += 2e-3 * np.array([t[e[1], 1], -t[e[1], 0]])          # opened 2 mm
+    x[cn[e[2], 2:]] += 2e-6 * t[e[2]]                                      # yielded by micrometres
+    x[cn[e[4], 2:]] += 5e-3 * t[e[4]]                                      # moved, but elastic
+    assert list(crack_status(cracks, x)[e]) == [ACTIVATED, ACTIVATED, INTACT, BROKEN, INTACT]
+    assert list(crack_status(cracks)[e]) == [ACTIVATED, ACTIVATED, ACTIVATED, BROKEN, INTACT]  # no positions
