@@ -281,7 +281,10 @@ class ContactSet:
         if not np.isfinite(tangential_ratio) or tangential_ratio <= 0.0:
             raise ValueError(f"tangential_ratio must be positive and finite, got {tangential_ratio!r}")
         self.tangential_ratio = tangential_ratio
-        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")  # base face friction
+        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")  # face friction, lowered as faces break
+        # the faces' friction as built or set (a parameter: checkpoints fingerprint it), while
+        # mu_tri is state that breakage lowers
+        self.face_mu = self.mu_tri.copy()
         # the one home of the strength-reduction factor F: the crack elements' when there are any
         self.interfaces = cracks.interfaces if cracks is not None else Interfaces({})
         # broken crack element between two triangles: sorted keys i * n_tri + j (i < j)
@@ -552,6 +555,7 @@ class ContactSet:
         if coef is None:
             raise ValueError("set_friction needs friction_angle or mu")
         self.mu_tri[tris] = coef
+        self.face_mu[tris] = coef
         self._refresh_pair_friction()
 
     @property

@@ -106,10 +106,37 @@ def model_fingerprint(sim) -> dict:
                                                _digest(getattr(cracks, "strength_multiplier", np.zeros(0)))))
     contact = getattr(sim, "contact", None)
     if contact is not None:
-        fp["contact"] = _text_digest(tuple(repr(getattr(contact, a, None)) for a in (
-            "penalty", "tangential_ratio", "damping_ratio", "softening", "loose_fraction"))
-            + (_digest(getattr(contact, "mu_tri", np.zeros(0))),))
+        fp["contact"] = _contact_digest(contact, getattr(contact, "face_mu", np.zeros(0)))
     return fp
+
+
+def _contact_digest(contact, face_mu) -> str:
+    """The contact set's parameters with the face friction ``face_mu`` (as built or set, not as
+    lowered by breakage: that is state, restored from the checkpoint)."""
+    return _text_digest(tuple(repr(getattr(contact, a, None)) for a in (
+        "penalty", "tangential_ratio", "damping_ratio", "softening", "loose_fraction")) + (_digest(face_mu),))
+
+
+def _written_with_current_friction(meta: dict, sim) -> bool:
+    """Whether a checkpoint's contact digest is that of this contact set with the face
+    friction saved in its own state: files written before the digest took the friction as
+    built took it as lowered by breakage at the time of writing, and would otherwise be
+    refused for every run that had broken an element (format 1 files of before 2026-11-24)."""
+    contact = getattr(sim, "contact", None)
+    try:
+        index = sim.providers.index(contact)
+        saved = meta["state"]["providers"][index]
+        saved_mu, broken = np.asarray(saved["mu_tri"]), np.asarray(saved["broken"], dtype=bool)
+    except (ValueError, KeyError, IndexError, TypeError):
+        return False
+    if saved_mu.shape != contact.face_mu.shape or broken.shape != (contact.topology.n_cracks,):
+        return False
+    # and the faces are the ones built here: breakage only lowers the friction of faces beside
+    # a broken element, every other face kept the friction it was built with
+    beside_broken = np.zeros(saved_mu.size, dtype=bool)
+    beside_broken[contact.topology.crack_triangles[broken].ravel()] = True
+    kept = (saved_mu == contact.face_mu) | (beside_broken & (saved_mu < contact.face_mu))
+    return bool(kept.all()) and meta["model"].get("contact") == _contact_digest(contact, saved_mu)
 
 
 _PART_NAMES = {"materials": "materials (elastic moduli, density or element damping)",
@@ -269,7 +296,11 @@ def load_checkpoint(sim, path) -> dict | None:
         raise ValueError(f"checkpoint {path} belongs to another mesh: saved with {_describe(saved)}, "
                          f"this simulation has {_describe(here)}")
     if meta.get("model") is not None:
-        differences = _model_differences(meta["model"], model_fingerprint(sim))
+        here_model = model_fingerprint(sim)
+        differences = _model_differences(meta["model"], here_model)
+        if differences and meta["model"].get("contact") != here_model.get("contact") \
+                and _written_with_current_friction(meta, sim):
+            differences = _model_differences({**meta["model"], "contact": here_model.get("contact")}, here_model)
         if differences:
             raise ValueError(f"checkpoint {path} belongs to another model on the same mesh; it differs in "
                              + "; ".join(differences))

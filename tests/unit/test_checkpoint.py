@@ -28,13 +28,13 @@ EVERY = 10
 
 
 def scene(nx: int = 6, reduce: bool = True, width: float = 0.6, scheme: str = "colour", backend: str | None = None,
-          softening: str = "vertex"):
+          softening: str = "vertex", rock_phi: float = 30.0):
     topo = build_topology(structured_rectangle(nx, 6, width, 0.6))
     model = Model(topo, ElasticMaterial(young=1e9, poisson=0.25, density=2500.0))
     model.set_gravity(0.0, -9.81)
     model.fix("bottom")
     model.set_initial_velocity(vx=3.0, vy=-1.5, where=np.flatnonzero(topo.x0[:, 1] > 0.35))
-    rock = CrackProperties(f_t=2e5, c=4e5, phi=30.0, G_I=5.0, G_II=20.0, p_n=1e10, name="rock")
+    rock = CrackProperties(f_t=2e5, c=4e5, phi=rock_phi, G_I=5.0, G_II=20.0, p_n=1e10, name="rock")
     cracks = CrackSet(topo, {0: rock}, contact_penalty=1e10, scheme=scheme, parallel_min=0)
     contact = ContactSet(topo, 1e10, friction_angle=30.0, mass=model.node_mass(), cracks=cracks, softening=softening)
     if reduce:
@@ -248,3 +248,51 @@ def test_a_checkpoint_written_by_the_flat_layout_loads_and_runs_on(reference):
     errors = [abs(r["balance_error_relative"]) for r in sim.history]
     assert max(errors) < 1e-2
     np.testing.assert_allclose(sim.state.x, ref[0].state.x, rtol=0, atol=1e-6 * scale)
+
+
+def test_a_run_whose_breakage_lowered_face_friction_resumes(tmp_path):
+    """Broken faces take the crack's residual friction (20 deg here, below the faces' 30 deg):
+    the face friction then differs from the one a fresh model is built with. That is state,
+    restored from the checkpoint, not a changed model: the run resumes and goes on bit for
+    bit. A model whose face friction was changed (``set_friction``) is still refused."""
+    ref = scene(rock_phi=20.0)
+    run(ref[0], HALF)
+    run(ref[0], HALF)
+    first = scene(rock_phi=20.0)
+    run(first[0], HALF)
+    lowered = int((first[2].mu_tri < first[2].face_mu).sum())
+    assert lowered > 5
+    path = ck.save_checkpoint(first[0], tmp_path / "run.ckpt")
+    again = scene(rock_phi=20.0)
+    ck.load_checkpoint(again[0], path)
+    assert int((again[2].mu_tri < again[2].face_mu).sum()) == lowered
+    run(again[0], HALF)
+    assert_same(ref, again)
+    for phi in (25.0, 35.0):  # a face friction lower or higher than the one it ran with
+        other = scene(rock_phi=20.0)
+        other[2].set_friction(friction_angle=phi)
+        with pytest.raises(ValueError, match="contact parameters"):
+            ck.load_checkpoint(other[0], path)
+
+
+def test_a_checkpoint_fingerprinted_with_lowered_friction_still_resumes(tmp_path):
+    """Files written before the fingerprint took the face friction as built took it as
+    lowered by breakage; they are checked against the friction saved in their own state."""
+    ref = scene(rock_phi=20.0)
+    run(ref[0], HALF)
+    run(ref[0], HALF)
+    first = scene(rock_phi=20.0)
+    run(first[0], HALF)
+    as_built = first[2].face_mu
+    first[2].face_mu = first[2].mu_tri.copy()  # the old rule: digest of the current friction
+    path = ck.save_checkpoint(first[0], tmp_path / "old.ckpt")
+    first[2].face_mu = as_built
+    again = scene(rock_phi=20.0)
+    ck.load_checkpoint(again[0], path)
+    run(again[0], HALF)
+    assert_same(ref, again)
+    for phi in (25.0, 35.0):  # a face friction lower or higher than the one it ran with
+        other = scene(rock_phi=20.0)
+        other[2].set_friction(friction_angle=phi)
+        with pytest.raises(ValueError, match="contact parameters"):
+            ck.load_checkpoint(other[0], path)
