@@ -20,9 +20,10 @@ Composed of :mod:`fdem.workflow.stages` so that a case script only builds the mo
    ``runout_start.npz`` (:func:`fdem.solve.checkpoint.load_checkpoint` restarts from it).
 
 Every stage's result (why it ended, when, how many steps) goes into the returned summary, and
-every ending is one of its outcomes: ``stable``, ``failed``, ``crept`` (the failing stage did not
-settle, but the runout came to rest after less than the failure displacement: the slope crept
-and stopped), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
+every ending is one of its outcomes: ``stable``, ``failed``, ``crept`` (a reduction stage did not
+settle, but the undamped stage after it came to rest after less than the failure displacement:
+the slope crept and stopped; in steps, the reduction then carries on from the resting state,
+and a later factor may still fail), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
 step: the reason, and the last good state to resume from with a smaller step). With a
 :class:`~fdem.workflow.journal.RunJournal` the run writes resumable checkpoints and a resumed
 run replays the workflow to where it stopped (:mod:`fdem.workflow.journal`).
@@ -272,12 +273,26 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                                                 damping=damped, fail=fail,
                                                 converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio)),
                                      journal=journal))
-                if r.reason != "converged":
-                    if sim.time_capped:
-                        summary["outcome"] = "time_capped"
-                        return
-                    summary["failed_at_factor"] = F
+                if r.reason == "converged":
+                    continue
+                if sim.time_capped:
+                    summary["outcome"] = "time_capped"
+                    return
+                summary["failed_at_factor"] = F
+                if r.reason == "failed":  # a node moved the failure displacement: the runout follows
                     break
+                # Not settled within its cap, yet nothing has moved the failure displacement: follow
+                # it undamped. A slope that creeps and comes to rest stands at F, and the reduction
+                # carries on from the resting state; one that runs on has failed, and that was its runout.
+                _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
+                if summary.get("outcome") != "crept":
+                    return
+                summary.pop("outcome")
+            else:
+                summary["outcome"] = "crept" if summary.get("crept_at_factors") else "stable"
+                if summary["outcome"] == "crept":
+                    summary["ending"] += f"; the reduction carried on and the slope stood at every factor to F = {F:.4g}"
+                return
         else:
             F_end = 1.0 / wf.final_strength
             seconds = (1.0 - wf.final_strength) / wf.reduction_rate
@@ -286,30 +301,47 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             summary["failed_at_factor"] = F_end
         summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
     if summary["outcome"] == "failed":
-        if out_dir is not None:
-            # the failed state before the runout: rerun the runout from it with other settings
-            # (a longer cap, a smaller step), or profile it (cases/benchmarks/profile_scene.py)
-            from pathlib import Path
+        _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
 
-            from fdem.solve.checkpoint import save_checkpoint
 
-            def save_start():
-                return str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
+def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> None:
+    """The undamped runout after the stage at ``summary["failed_at_factor"]``, to rest (or its cap),
+    with ``runout_start.npz`` written first; then :func:`_tell_creep`. The first runout of a run
+    is named ``runout`` (and its start mark ``runout_start``); a later one, after a creep the
+    reduction carried on from, carries its factor in both names (``runout_F1.429``), so that a
+    resumed run replays each by name."""
+    F = summary["failed_at_factor"]
+    later = any(st["name"] == "runout" for st in summary["stages"])
+    suffix = f"_F{F:.3f}" if later else ""
+    if out_dir is not None:
+        # the failed state before the runout: rerun the runout from it with other settings
+        # (a longer cap, a smaller step), or profile it (cases/benchmarks/profile_scene.py)
+        from pathlib import Path
 
-            summary["runout_checkpoint"] = journal.once("runout_start", save_start) if journal else save_start()
-        runout = record(run_stage(sim, runout_stage(wf, T, height, g), journal=journal))
-        _tell_creep(summary, runout, fail.displacement)
+        from fdem.solve.checkpoint import save_checkpoint
+
+        def save_start():
+            return str(save_checkpoint(sim, Path(out_dir) / "runout_start.npz"))
+
+        summary["runout_checkpoint"] = journal.once("runout_start" + suffix, save_start) if journal else save_start()
+    stage = runout_stage(wf, T, height, g)
+    if suffix:
+        import dataclasses
+
+        stage = dataclasses.replace(stage, name=stage.name + suffix)
+    runout = record(run_stage(sim, stage, journal=journal))
+    summary["outcome"] = "failed"
+    _tell_creep(summary, runout, fail.displacement)
 
 
 def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     """A slope whose failing stage did not settle within its cap but that came to rest in the
     runout having moved less than the failure displacement (1 % of the height) crept and
     stopped: it did not fail at that factor. Its outcome is ``crept``; ``crept_at_factor`` is
-    the factor, ``failed_at_factor`` goes back to None, and the reduction-step bracket reads it
-    as a factor the slope stands at (:func:`factor_of_safety_figures`): the bracket is then
-    ``[F, None]``, open above, since the reduction stopped there and no larger factor was tried
-    (carrying the steps on from the resting state is not built). The creep is bounded by
-    the sum of the two stages' largest node displacements."""
+    the factor (``crept_at_factors`` every such factor, when the reduction steps carried on from
+    the resting state), ``failed_at_factor`` goes back to None, and the reduction-step bracket
+    reads it as a factor the slope stands at (:func:`factor_of_safety_figures`). The creep is
+    bounded by the sum of the two stages' largest node displacements."""
     if runout.reason != "converged" or len(summary["stages"]) < 2:
         return
     failing = summary["stages"][-2]
@@ -321,12 +353,11 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     factor = summary["failed_at_factor"]
     summary["outcome"] = "crept"
     summary["crept_at_factor"] = factor
+    summary.setdefault("crept_at_factors", []).append(factor)
     summary["failed_at_factor"] = None
-    summary["crept_m"] = creep
+    summary["crept_m"] = max(creep, summary.get("crept_m", 0.0))
     summary["ending"] = (f"crept at most {creep:.3g} m at F = {factor:.4g} and came to rest: no failure there "
-                         f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height); the "
-                         f"reduction stopped at that factor, so larger factors were not tried: the factor of "
-                         f"safety is at least {factor:.4g} (search it with fos = (lower, upper, tol))")
+                         f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height)")
 
 
 def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:

@@ -153,9 +153,55 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
         assert summary["crept_at_factor"] == 2.0 and summary["failed_at_factor"] is None
         assert summary["crept_m"] == pytest.approx(0.036)
         assert fos["fos_bracket"] == [2.0, None] and fos["fos"] is None  # it stands at 2.0
-        assert "larger factors were not tried" in summary["ending"]
     else:
         assert fos["fos_bracket"] == [1.667, 2.0]
+
+
+@pytest.mark.parametrize("script, outcome, bracket, names", [
+    # creeps at 1.5 and comes to rest; the steps carry on and it fails at 2.0
+    ({"reduction_F1.500": ("capped", 0.03), "runout": ("converged", 0.006),
+      "reduction_F2.000": ("capped", 0.03), "runout_F2.000": ("converged", 0.5)},
+     "failed", [1.5, 2.0], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout", "reduction_F2.000",
+                            "runout_F2.000"]),
+    # creeps at 1.5 and at 2.0 and stands at the end of the schedule
+    ({"reduction_F1.500": ("capped", 0.03), "runout": ("converged", 0.006),
+      "reduction_F2.000": ("capped", 0.03), "runout_F2.000": ("converged", 0.002)},
+     "crept", [2.0, None], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout", "reduction_F2.000",
+                            "runout_F2.000"]),
+    # a node moves the failure displacement at 1.5: the runout follows, no carrying on
+    ({"reduction_F1.500": ("failed", 0.3), "runout": ("converged", 0.006)},
+     "failed", [1.25, 1.5], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout"]),
+])
+def test_the_reduction_steps_carry_on_after_a_creep(monkeypatch, script, outcome, bracket, names):
+    """The workflow's control flow with scripted stage endings (every stage not in ``script``
+    converges with 1 mm): a slope that crept and came to rest at one factor is reduced further
+    from its resting state, each undamped stage named so that a resumed run replays it."""
+    import types
+
+    from fdem.workflow import slope
+
+    def fake_run_stage(sim, st, journal=None):
+        reason, moved = script.get(st.name, ("converged", 1e-3))
+        return stage(st.name, reason, moved, st.reduction if st.reduction is not None else 0.0)
+
+    monkeypatch.setattr(slope, "run_stage", fake_run_stage)
+    monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
+    sim = types.SimpleNamespace(time_capped=False)
+    cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
+    wf = slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0))
+    summary = {"stages": [], "fos": None, "failed_at_factor": None}
+
+    def record(result):
+        summary["stages"].append(result.as_dict())
+        return result
+
+    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
+                      slope.NO_DAMPING, None, None)
+    assert [st["name"] for st in summary["stages"]] == names
+    assert summary["outcome"] == outcome
+    assert factor_of_safety_figures(summary)["fos_bracket"] == bracket
+    if len(names) > 4:
+        assert 1.5 in summary["crept_at_factors"]
 
 
 
