@@ -206,9 +206,11 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
 
     geo = four_slope_geometry(angle, spacing, joint_offset=joint_offset, **(extents or {}))
     fabric = geo.joint_sets[0]
+    band = getattr(fabric, "band", None)
+    fabric = getattr(fabric, "joints", fabric)  # the brick set inside a BandedSet
     H = FOUR_SLOPE_HEIGHT
     ext = {"crest_length": 2 * H, "toe_length": 3 * H, "base_depth": H}
-    ext.update({k: v for k, v in (extents or {}).items() if v is not None})
+    ext.update({k: v for k, v in (extents or {}).items() if v is not None and k != "boundary_band"})
     cracks = {str(tag): {k: v for k, v in dataclasses.asdict(p).items() if v is not None}
               for tag, p in four_slope_property_sets().items()}
     wf = {}
@@ -223,7 +225,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
                   "min_joint_length": geo.min_joint_length},
         "slope": {"kind": "simple", "height": H, "face_angle": FOUR_SLOPE_FACE_ANGLE, **ext},
         "joints": [{"kind": "brick", "name": fabric.name, "dip": fabric.dip, "spacing": fabric.spacing,
-                    "offset": fabric.offset}],
+                    "offset": fabric.offset, **({"side_band": band} if band is not None else {})}],
         "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY},
         "cracks": cracks,
         "contact": {"penalty": CONTACT_PENALTY, "friction_angle": 30.0},
@@ -297,9 +299,6 @@ def main(argv=None) -> dict:
             if flag not in args.run_record["argv"] for a in (flag, value)]
     extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth", "boundary_band")
                if getattr(args, k) is not None}
-    if "boundary_band" in extents and args.write_scene is not None:
-        parser.error("--boundary-band cannot be written into a scene file yet (scene files have no joint bands); "
-                     "run the case itself")
     for k, v in extents.items():
         if not (math.isfinite(v) and v > 0):
             parser.error(f"--{k.replace('_', '-')} must be a positive number of metres, got {v}")

@@ -41,7 +41,8 @@ def joint_sets(s: dict, polygon) -> list:
     ``j``-th is joint set ``j`` (crack tag ``j``)."""
     import numpy as np
 
-    from fdem.geometry.joint_sets import BrickSet, IntermittentSet, PersistentSet, SegmentSet, StochasticSet
+    from fdem.geometry.joint_sets import (BandedSet, BrickSet, IntermittentSet, PersistentSet, SegmentSet,
+                                          StochasticSet)
     from fdem.geometry.polygons import slope_toe
 
     out = []
@@ -67,6 +68,8 @@ def joint_sets(s: dict, polygon) -> list:
             out.append(StochasticSet(count=js["count"], length=tuple(js["length"]), dip=tuple(js["dip"]),
                                      seed=js["seed"], region=None if js["region"] is None else tuple(js["region"]),
                                      name=name))
+        if js.get("side_band") is not None:
+            out[-1] = BandedSet(out[-1], js["side_band"])
     return out
 
 

@@ -106,6 +106,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                              "[\"exponential\", mean] | [\"uniform\", lo, hi]"),
         "seed": Key("int", "random seed (stochastic)", default=0, low=0),
         "region": Key("floats", "[x0, y0, x1, y1] of the joint centres (stochastic; default the model)", length=4),
+        "side_band": _f("width of the intact bands kept free of these joints along the left and right "
+                        "boundaries [m] (any kind; default none): slip at the rollers stays out of the mechanism",
+                        **POSITIVE),
     },
     "mesh": {  # only with scene.mesh
         "joints": Key("any", "{group name = joint-set tag} of the mesh's joint curves"),
@@ -209,11 +212,11 @@ _JOINT_KEYS = {
     "stochastic": {"count", "length", "dip"},
 }
 _JOINT_OPTIONAL = {
-    "persistent": {"offset", "through_toe", "name"},
-    "intermittent": {"stagger", "offset", "through_toe", "phase", "rows", "name"},
-    "brick": {"cross_spacing", "cross_dip", "offset", "through_toe", "phase", "name"},
-    "segments": {"name"},
-    "stochastic": {"seed", "region", "name"},
+    "persistent": {"offset", "through_toe", "name", "side_band"},
+    "intermittent": {"stagger", "offset", "through_toe", "phase", "rows", "name", "side_band"},
+    "brick": {"cross_spacing", "cross_dip", "offset", "through_toe", "phase", "name", "side_band"},
+    "segments": {"name", "side_band"},
+    "stochastic": {"seed", "region", "name", "side_band"},
 }
 _SLOPE_KEYS = {
     "simple": {"height", "face_angle", "crest_length", "toe_length", "base_depth"},

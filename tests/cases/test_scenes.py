@@ -214,6 +214,30 @@ def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_ba
     assert exit_.value.code == 2 and "--base-depth must be a positive number of metres" in capsys.readouterr().err
 
 
+def test_four_slopes_side_bands_go_into_the_scene_file(tmp_path):
+    """``--boundary-band`` writes ``side_band`` into the joint set, and the scene builds the same
+    joint traces as the case: none within the band of either boundary."""
+    from fdem.cases import four_slopes
+    from fdem.scene.objects import geometry as scene_geometry
+
+    path = tmp_path / "banded.toml"
+    four_slopes.main(["--angle", "high", "--boundary-band", "5", "--write-scene", str(path)])
+    scene = read_scene(path)
+    assert scene["joints"][0]["side_band"] == 5.0 and scene["joints"][0]["kind"] == "brick"
+    case = four_slopes.four_slope_geometry("high", "fine", boundary_band=5.0)
+    built = scene_geometry(scene)
+    bounds = case.bodies[0].bounds
+    a = case.joint_sets[0].raw_segments(bounds)
+    b = built.joint_sets[0].raw_segments(bounds)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+    x = b.reshape(-1, 2)[:, 0]
+    assert x.min() >= bounds[0] + 5.0 - 1e-9 and x.max() <= bounds[2] - 5.0 + 1e-9
+    bad = tmp_path / "bad.toml"
+    bad.write_text(path.read_text().replace("side_band = 5.0", "side_band = -1.0"))
+    with pytest.raises(SceneError, match="side_band"):
+        read_scene(bad)
+
+
 # ----------------------------------------------------------------------------- a user's mesh
 def _user_mesh(path: Path, size: float = 1.5) -> None:
     """A slope meshed by Gmsh's own API with the user's group names: ``base`` and ``sides``
