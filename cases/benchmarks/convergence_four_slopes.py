@@ -38,22 +38,24 @@ def folder(root: Path, angle: str, spacing: str, size: str) -> Path:
 
 
 def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, resume: bool,
-            runout_time: float = 60.0) -> list[str]:
+            runout_time: float = 60.0, model: tuple[str, ...] = ()) -> list[str]:
     """The ``fdem run four-slopes`` command of one run: with ``runout`` to rest and with pictures
-    (the mechanism at mid-failure and at rest), else the runout skipped and no pictures."""
+    (the mechanism at mid-failure and at rest), else the runout skipped and no pictures;
+    ``model``: further options of the model (extents, side bands, the reduction schedule)."""
     exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
     if resume:
         return exe + ["--resume", str(out)]
-    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
+    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos), *model,
                   "--threads", "1", "--quiet", "--yes", "--out", str(out)]
     return argv + ["--runout-time", str(runout_time)] if runout else argv + ["--runout-time", "0.001", "--no-pictures"]
 
 
-def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, runout_time: float = 60.0) -> None:
+def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, runout_time: float = 60.0,
+            model: tuple[str, ...] = ()) -> None:
     if (out / "summary.json").exists():
         return
     resume = (out / "checkpoint.npz").exists()
-    argv = command(out, angle, spacing, size, fos, runout, resume, runout_time)
+    argv = command(out, angle, spacing, size, fos, runout, resume, runout_time, model)
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.parent / f"{out.name}.log", "a") as log:
@@ -70,12 +72,14 @@ def row(summary: dict) -> dict:
     failed = wf.get("failed_at_factor")
     if wf.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
         stable.append(wf["crept_at_factor"])
-    runout_stage = next((st for st in wf.get("stages", []) if st["name"] == "runout"), None)
+    # the last undamped stage: after a creep the reduction carries on, and a later one is runout_F<factor>
+    runout_stage = next((st for st in reversed(wf.get("stages", [])) if st["name"].startswith("runout")), None)
     went_to_rest = runout_stage is not None and runout_stage["reason"] == "converged"
     run = summary.get("runout", {})
     tags = summary.get("cracks_by_tag") or {}
     return {
         "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
+        "extents_m": summary.get("extents_m"),
         "fos_bisection": fos.get("fos"), "bisection_bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
         "n_trials": fos.get("n_trials"),
         "steps_bracket": [max(stable) if stable else None, failed], "outcome": summary.get("outcome"),
@@ -138,6 +142,12 @@ def main(argv=None) -> list[dict]:
                         help="with --runout: the cap of the runout stage [s simulated] (default 60: in effect none, "
                              "the stage ends when the kinetic energy has stayed below 1 %% of its peak for one "
                              "response time)")
+    parser.add_argument("--crest-length", type=float, default=None, metavar="METRES",
+                        help="crest plateau of every run (fdem run four-slopes --crest-length; default its own)")
+    parser.add_argument("--boundary-band", type=float, default=None, metavar="METRES",
+                        help="intact side bands of every run (fdem run four-slopes --boundary-band; default none)")
+    parser.add_argument("--reduction", choices=["steps", "rate"], default=None,
+                        help="the reduction schedule of every run (default the case's: damped steps)")
     parser.add_argument("--root", type=Path, default=Path("runs/convergence"))
     parser.add_argument("--table-only", action="store_true", help="run nothing: the table of the finished runs")
     args = parser.parse_args(argv)
@@ -155,11 +165,14 @@ def main(argv=None) -> list[dict]:
     lo, hi, tol = args.fos
     if not (0 < lo < hi and 0 < tol < hi - lo):
         parser.error(f"--fos needs 0 < LOWER < UPPER and 0 < TOL < UPPER - LOWER, got {args.fos}")
+    model = tuple(a for flag, value in (("--crest-length", args.crest_length), ("--boundary-band", args.boundary_band),
+                                        ("--reduction", args.reduction)) if value is not None
+                  for a in (flag, str(value)))
     if not args.table_only:
         for size in args.sizes:  # coarse to fine over all scenes: the cheap rows first
             for angle, spacing in scenes:
                 run_one(folder(args.root, angle, spacing, size), angle, spacing, size, args.fos, args.runout,
-                        args.runout_time)
+                        args.runout_time, model)
     rows = table(args.root)
     print_table(rows)
     TABLE.parent.mkdir(parents=True, exist_ok=True)
