@@ -1,0 +1,157 @@
+"""Do the four slopes' boundaries take part? The factor of safety of one scene with wider models
+and with intact side bands, each a bisection from the equilibrium state.
+
+A model is far enough from its boundaries when a wider one gives the same bracket and the same
+mechanism. Each variant is one ``fdem run four-slopes`` run in ``<root>/<angle>_<spacing>[_crest<C>]
+[_band<B>]`` (crest plateau ``C`` m instead of the default 2 H = 30 m, joints kept ``B`` m off the
+left and right rollers), started, resumed from its checkpoint, or, when its ``summary.json``
+exists, only read, one Numba thread each. The table is printed and written to
+``docs/cases/four_slopes_boundaries.json``; the pictures of each variant's first failing trial
+(``fos_failure.png``) show its mechanism.
+
+    python cases/benchmarks/boundaries_four_slopes.py --scene low:fine --variants 30 60 90 60:5 --root runs/bnd
+    python cases/benchmarks/boundaries_four_slopes.py --scene high:fine --variants 30 30:5 60:5 --fos 1.0 3.0 0.04 --root runs/bnd
+    python cases/benchmarks/boundaries_four_slopes.py --root runs/bnd --table-only
+
+A variant is ``CREST`` or ``CREST:BAND`` in metres.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = ROOT / "docs" / "cases" / "four_slopes_boundaries.json"
+DEFAULT_CREST = 30.0
+
+
+def parse_variant(text: str) -> tuple[float, float | None]:
+    """``"60"`` -> (60.0, None); ``"60:5"`` -> (60.0, 5.0)."""
+    crest, _, band = text.partition(":")
+    c, b = float(crest), (float(band) if band else None)
+    if not c > 0 or (b is not None and not b > 0):
+        raise ValueError(f"a variant is CREST or CREST:BAND with positive metres, got {text!r}")
+    return c, b
+
+
+def folder(root: Path, angle: str, spacing: str, crest: float, band: float | None) -> Path:
+    name = f"{angle}_{spacing}"
+    if crest != DEFAULT_CREST:
+        name += f"_crest{crest:g}"
+    if band is not None:
+        name += f"_band{band:g}"
+    return root / name
+
+
+def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: float | None, fos) -> list[str]:
+    exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
+    if (out / "checkpoint.npz").exists():
+        return exe + ["--resume", str(out)]
+    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos)]
+    if crest != DEFAULT_CREST:
+        argv += ["--crest-length", f"{crest:g}"]
+    if band is not None:
+        argv += ["--boundary-band", f"{band:g}"]
+    # only the bracket and its mechanism matter here: a short runout
+    return argv + ["--runout-time", "0.5", "--threads", "1", "--quiet", "--yes", "--out", str(out)]
+
+
+def row(summary: dict, fos_json: dict | None) -> dict:
+    """The boundary figures of one run: its bracket, and what broke at F = 1 (boundary slip shows there)."""
+    wf = summary.get("workflow") or {}
+    fos = wf.get("fos") or {}
+    stages = wf.get("stages") or []
+    eq = stages[0] if stages else {}
+    ext = summary.get("extents_m") or {}
+    return {
+        "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
+        "crest_length_m": ext.get("crest_length"), "side_band_m": ext.get("boundary_band"),
+        "equilibrium": eq.get("reason"), "broken_at_F1": eq.get("n_broken"),
+        "failed_at_F1": summary.get("failed_at_factor") == 1.0,
+        "fos": fos.get("fos"), "bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
+        "trials": [[t["factor"], t["stable"], t.get("n_broken")] for t in fos.get("trials", [])],
+        "failing_trial_broken": (fos_json or {}).get("failure_broken_elements"),
+        "wall_seconds": summary.get("seconds_simulation"),
+    }
+
+
+def table(root: Path) -> list[dict]:
+    rows = []
+    for path in sorted(root.glob("*/summary.json")):
+        s = json.loads(path.read_text())
+        if s.get("case") != "four-slopes" or not s.get("workflow"):
+            continue
+        if not s.get("extents_m"):  # a run from before summaries named their extents: its command does
+            argv = json.loads((path.parent / "run.json").read_text()).get("argv", [])
+            given = {a: float(argv[i + 1]) for i, a in enumerate(argv[:-1]) if a in ("--crest-length", "--boundary-band")}
+            s["extents_m"] = {"crest_length": given.get("--crest-length", DEFAULT_CREST),
+                              "boundary_band": given.get("--boundary-band")}
+        fj = path.parent / "fos.json"
+        rows.append({**row(s, json.loads(fj.read_text()) if fj.exists() else None), "folder": str(path.parent)})
+    rows.sort(key=lambda r: (r["scene"] or "", r["size_m"] or 0, r["crest_length_m"] or 0, r["side_band_m"] or 0))
+    return rows
+
+
+def print_table(rows: list[dict]) -> None:
+    print("| scene | size | crest | side bands | triangles | broken at F = 1 | FoS (bisection) | bracket | wall |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        b = r["bracket"] or [None, None]
+        bracket = ("fails at F = 1" if r["failed_at_F1"] else
+                   f"{'-' if b[0] is None else format(b[0], '.4g')}-{'-' if b[1] is None else format(b[1], '.4g')}")
+        print(f"| {r['scene']} | {r['size_m']:g} m | {r['crest_length_m']:g} m | "
+              f"{'-' if r['side_band_m'] is None else format(r['side_band_m'], 'g') + ' m'} | {r['n_triangles']} | "
+              f"{r['broken_at_F1']} | {'-' if r['fos'] is None else format(r['fos'], '.3f')} | "
+              f"{bracket} | "
+              f"{r['wall_seconds']:.0f} s |")
+
+
+def main(argv=None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="low:fine", help="angle:spacing (default low:fine)")
+    parser.add_argument("--variants", nargs="+", default=["30", "60", "90"],
+                        help="CREST or CREST:BAND [m] per run (default 30 60 90)")
+    parser.add_argument("--size", default="1.0", help="element size [m] (default 1.0)")
+    parser.add_argument("--fos", type=float, nargs=3, default=[1.0, 2.0, 0.04], metavar=("LOWER", "UPPER", "TOL"))
+    parser.add_argument("--root", type=Path, default=Path("runs/bnd"))
+    parser.add_argument("--table-only", action="store_true", help="run nothing: the table of the finished runs")
+    args = parser.parse_args(argv)
+    angle, _, spacing = args.scene.partition(":")
+    if angle not in ("low", "high") or spacing not in ("fine", "coarse"):
+        parser.error(f"--scene takes angle:spacing with angle low|high and spacing fine|coarse, got {args.scene!r}")
+    try:
+        variants = [parse_variant(v) for v in args.variants]
+    except ValueError as err:
+        parser.error(str(err))
+    lo, hi, tol = args.fos
+    if not (0 < lo < hi and 0 < tol < hi - lo):
+        parser.error(f"--fos needs 0 < LOWER < UPPER and 0 < TOL < UPPER - LOWER, got {args.fos}")
+    if not args.table_only:
+        for crest, band in variants:
+            out = folder(args.root, angle, spacing, crest, band)
+            if (out / "summary.json").exists():
+                continue
+            argv_run = command(out, angle, spacing, args.size, crest, band, args.fos)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            print(" ".join(argv_run[3:]), flush=True)
+            with open(out.parent / f"{out.name}.log", "a") as log:
+                subprocess.run(argv_run, env={**os.environ, "NUMBA_NUM_THREADS": "1"}, stdout=log,
+                               stderr=subprocess.STDOUT, cwd=ROOT, check=False)
+    rows = table(args.root)
+    print_table(rows)
+    TABLE.parent.mkdir(parents=True, exist_ok=True)
+    old = json.loads(TABLE.read_text()) if TABLE.exists() else {"rows": []}
+    keep = [r for r in old["rows"] if r["folder"] not in {x["folder"] for x in rows}]
+    TABLE.write_text(json.dumps({"command": "python cases/benchmarks/boundaries_four_slopes.py "
+                                            + " ".join(sys.argv[1:] if argv is None else argv),
+                                 "rows": keep + rows}, indent=1))
+    print(f"wrote {TABLE}")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
