@@ -117,6 +117,10 @@ def runout(topology: Topology, x: np.ndarray, toe_x: float, threshold: float = 0
     * ``max_displacement_m``: largest node displacement anywhere; ``p50/p90/p99_displacement_m``:
       :func:`displacement_statistics` over the displaced material.
     * ``deformed_area_m2``: current area of all triangles (a mass-balance check).
+    * ``off_model_area_m2``: reference area of displaced triangles whose centroid lies beyond
+      the model's initial x range: debris that ran off the end of the floor, where nothing holds
+      it. When it is not zero the runout was cut by the model's extent and ``runout_distance_m``
+      is a lower bound (lengthen the floor in front of the toe).
     """
     x = _check_positions(topology, x)
     moved = displaced(topology, x, threshold)
@@ -137,6 +141,8 @@ def runout(topology: Topology, x: np.ndarray, toe_x: float, threshold: float = 0
         "p99_displacement_m": stats["p99_m"],
         "n_displaced_triangles": int(moved.sum()),
         "deformed_area_m2": float(triangle_areas(x, topology.triangles).sum()),
+        "off_model_area_m2": float(area[(xc[:, 0] < topology.x0[:, 0].min())
+                                        | (xc[:, 0] > topology.x0[:, 0].max())].sum()),
     }
 
 

@@ -182,6 +182,10 @@ class RunReport:
                            else events.compare_with_reference(mags, self.reference_events)),
             "ledger_error_relative": float(hist[-1]["balance_error_relative"]) if hist else 0.0,
         }
+        if run["off_model_area_m2"] > 0.0:  # the floor ended under the debris: the distance is cut
+            out["caveats"] = [f"{run['off_model_area_m2']:.3g} m^2 of the failed mass ran off the end of the model, "
+                              f"beyond its initial x range: the runout distance is a lower bound; lengthen the "
+                              f"floor in front of the toe"]
         if extra:
             out.update(extra)
             if isinstance(extra.get("workflow"), dict):

@@ -39,6 +39,18 @@ def test_runout_of_a_rigidly_moved_block_is_its_known_travel_and_area():
     for key in ("max_displacement_m", "p50_displacement_m", "p90_displacement_m", "p99_displacement_m"):
         assert r[key] == pytest.approx(travel)
     assert r["deformed_area_m2"] == pytest.approx(400.0)
+    # the body ends at x = 0 (its toe): the block lies wholly beyond it, where no floor holds it
+    assert r["off_model_area_m2"] == pytest.approx(60.0)
+
+
+def test_debris_is_off_the_model_only_beyond_its_initial_extent():
+    x = TOPO.x0.copy()
+    x[TOPO.triangles[BLOCK].ravel()] += [5.0, 0.0]  # still over the body: nothing off it
+    assert runout(TOPO, x, toe_x=0.0)["off_model_area_m2"] == 0.0
+    half = BLOCK & (CENTROID0[:, 0] < 5.0)  # 5 x 6 cells moved 6 m left: their centroids at x < 0
+    x = TOPO.x0.copy()
+    x[TOPO.triangles[half].ravel()] += [-6.0, 0.0]
+    assert runout(TOPO, x, toe_x=0.0)["off_model_area_m2"] == pytest.approx(30.0)
 
 
 def test_one_thrown_triangle_does_not_change_the_runout_distance():
@@ -53,6 +65,7 @@ def test_one_thrown_triangle_does_not_change_the_runout_distance():
 def test_nothing_moved_gives_zero_runout():
     r = runout(TOPO, TOPO.x0.copy(), toe_x=0.0)
     assert r["runout_distance_m"] == 0.0 and r["runout_volume_m2"] == 0.0 and r["n_displaced_triangles"] == 0
+    assert r["off_model_area_m2"] == 0.0
 
 
 def test_deposit_profile_of_a_block_on_the_floor_is_its_height():
