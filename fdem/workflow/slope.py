@@ -331,6 +331,9 @@ def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> N
         stage = dataclasses.replace(stage, name=stage.name + suffix)
     runout = record(run_stage(sim, stage, journal=journal))
     summary["outcome"] = "failed"
+    if runout.reason == "left_model":
+        summary["ending"] = (f"the failed mass ran off the end of the model at t = {runout.t_end:.4g} s ({runout.detail}): "
+                             f"the runout distance is a lower bound; lengthen the floor in front of the toe")
     _tell_creep(summary, runout, fail.displacement)
 
 
@@ -399,10 +402,12 @@ def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     ``wf.runout_dt_fraction``; ends when the kinetic energy has stayed below
     ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
     ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
-    the model height ``H`` [m] under gravity ``g`` [m/s^2])."""
+    the model height ``H`` [m] under gravity ``g`` [m/s^2]); it stops ``left_model`` when a node
+    runs 1 % of ``H`` beyond the model's initial extent (off the end of the floor)."""
     cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
     return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
-                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T))
+                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T),
+                 domain_margin=0.01 * height)
 
 
 def factor_of_safety_figures(result: dict) -> dict:

@@ -12,10 +12,13 @@ changes with the mesh and the penalties):
   peak, and/or the largest monitored speed fall below their limits;
 * ``fail``: an objective failure criterion fires — a monitored node moves more than a set
   displacement since the stage began, or keeps a speed above a limit;
-* ``max_time``: the cap [s] on a stage with rules; a capped stage reports so.
+* ``max_time``: the cap [s] on a stage with rules; a capped stage reports so;
+* ``domain_margin``: material has left the model: a node lies more than this margin beyond
+  the model's initial x range or below its base (debris run off the end of the floor, where
+  nothing holds it and it would fall for ever).
 
 Every stage reports why it ended (:class:`StageResult`): ``converged``, ``failed``,
-``capped`` or ``completed`` (a fixed-duration stage that ran its time).
+``capped``, ``completed`` (a fixed-duration stage that ran its time) or ``left_model``.
 
 Time scales come from the model (:func:`response_time`): the fundamental period of a
 slope of height ``H`` (shear beam on a rigid base) is ``T = 4 H / c_s`` with
@@ -124,6 +127,10 @@ class Stage:
     dt_fraction : time-step factor of the stage, the fraction of the critical step (``None``: the
         simulation's ``dt_fraction``; ignored when the simulation has a user time step). The
         simulation's own factor is restored when the stage ends.
+    domain_margin : end the stage ``left_model`` when a node lies more than this [m] beyond the
+        model's initial x range or below its initial base (``None``: never); a runout whose
+        debris runs off the end of the floor stops there, with the state that shows it, instead
+        of following the debris falling into the void until its cap
     density_scaling : run the stage on density-scaled inertial masses
         (:mod:`fdem.solve.density_scaling`, within the simulation's added-mass budget).
         ``None`` (default): yes for a damped (quasi-static) stage, no for an undamped (dynamic)
@@ -149,6 +156,7 @@ class Stage:
     monitor: object = None
     dt_fraction: float | None = None
     density_scaling: bool | None = None
+    domain_margin: float | None = None
 
     def __post_init__(self):
         if not self.name:
@@ -157,6 +165,7 @@ class Stage:
             raise ValueError(f"stage {self.name!r}: dt_fraction (time-step factor) must lie in (0, 1], got {self.dt_fraction}")
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
         _positive_or_none(self.max_time, f"stage {self.name!r}: max_time")
+        _positive_or_none(self.domain_margin, f"stage {self.name!r}: domain_margin")
         _positive_or_none(self.reduction, f"stage {self.name!r}: reduction")
         if self.gravity_factor is not None and not (math.isfinite(self.gravity_factor) and self.gravity_factor >= 0):
             raise ValueError(f"stage {self.name!r}: gravity_factor must be finite and >= 0, got {self.gravity_factor!r}")
@@ -328,8 +337,19 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
             if floor > 0.0:
                 status["limit"] = max(conv.unbalanced_ratio, conv.roundoff_factor * floor)
 
+    x0 = sim.model.topology.x0
+    box = (x0[:, 0].min(), x0[:, 0].max(), x0[:, 1].min())
+
     def rule(s: Simulation) -> bool:
         t = s.state.time - t0
+        if stage.domain_margin is not None:
+            m, x = stage.domain_margin, s.state.x
+            out = (x[:, 0] < box[0] - m) | (x[:, 0] > box[1] + m) | (x[:, 1] < box[2] - m)
+            if out.any():
+                status["reason"] = "left_model"
+                status["detail"] = (f"{int(out.sum())} node(s) more than {m:.3g} m beyond the model's initial extent "
+                                    f"(x {box[0]:.4g}..{box[1]:.4g} m, base y {box[2]:.4g} m) after {t:.4g} s")
+                return True
         if ramp is not None:
             s0, s1, seconds = ramp
             strength = s0 + (s1 - s0) * min(t / seconds, 1.0)

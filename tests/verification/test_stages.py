@@ -54,6 +54,37 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     s.sim.user_dt = None
 
 
+def test_a_stage_ends_when_material_leaves_the_model():
+    """A body thrown sideways at 3 m/s crosses its initial x range plus a 1 cm margin after
+    (0.01 m) / (3 m/s) = 3.3 ms: a stage with ``domain_margin`` ends ``left_model`` then
+    (at its next check), one without runs to its cap."""
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+
+    def thrown():
+        topo = build_topology(structured_rectangle(3, 3, 0.3, 0.3))
+        model = Model(topo, ElasticMaterial(young=1e8, poisson=0.25, density=2500.0))
+        model.set_gravity(0.0, -9.81)  # free: it falls 1 cm in 45 ms, after it has left sideways
+        model.set_initial_velocity(vx=3.0, vy=0.0)
+        return Simulation(model, progress=False)
+
+    sim = thrown()
+    r = run_stage(sim, Stage("runout", max_time=0.02, converge=Convergence(unbalanced_ratio=None, speed=1e-6),
+                             check_interval=5e-4, domain_margin=0.01), frames=False)
+    assert r.reason == "left_model" and "beyond the model's initial extent" in r.detail
+    assert 0.01 / 3.0 <= r.t_end <= 0.01 / 3.0 + 5e-4 + 2 * r.dt
+    sim = thrown()
+    r = run_stage(sim, Stage("runout", max_time=0.02, converge=Convergence(unbalanced_ratio=None, speed=1e-6),
+                             check_interval=5e-4), frames=False)
+    assert r.reason == "capped"
+    with pytest.raises(ValueError, match="domain_margin"):
+        Stage("x", duration=1.0, domain_margin=-1.0)
+    assert runout_stage(SlopeWorkflow(), 0.3, 30.0, 9.81).domain_margin == pytest.approx(0.3)
+
+
 def test_a_trial_stage_keeps_its_time_step_factor():
     from fdem.workflow.fos import _trial_stage_at
 
