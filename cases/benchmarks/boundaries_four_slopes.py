@@ -24,6 +24,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from convergence_four_slopes import finished  # noqa: E402  (a run stopped part-way is resumed, not read)
+
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "docs" / "cases" / "four_slopes_boundaries.json"
 DEFAULT_CREST = 30.0
@@ -133,7 +136,7 @@ def main(argv=None) -> list[dict]:
     if not args.table_only:
         for crest, band in variants:
             out = folder(args.root, angle, spacing, crest, band)
-            if (out / "summary.json").exists():
+            if finished(out):
                 continue
             argv_run = command(out, angle, spacing, args.size, crest, band, args.fos)
             out.parent.mkdir(parents=True, exist_ok=True)
