@@ -3,8 +3,8 @@ and with intact side bands, each a bisection from the equilibrium state.
 
 A model is far enough from its boundaries when a wider one gives the same bracket and the same
 mechanism. Each variant is one ``fdem run four-slopes`` run in ``<root>/<angle>_<spacing>[_crest<C>]
-[_band<B>]`` (crest plateau ``C`` m instead of the default 2 H = 30 m, joints kept ``B`` m off the
-left and right rollers), started, resumed from its checkpoint, or, when its ``summary.json``
+[_band<B>]`` (crest plateau ``C`` m, folder suffix when not 30 m; joints kept ``B`` m off the
+left and right rollers; floor 45 m and base 15 m in every variant), started, resumed from its checkpoint, or, when its ``summary.json``
 exists, only read, one Numba thread each. The table is printed and written to
 ``docs/cases/four_slopes_boundaries.json``; the pictures of each variant's first failing trial
 (``fos_failure.png``) show its mechanism.
@@ -50,15 +50,16 @@ def folder(root: Path, angle: str, spacing: str, crest: float, band: float | Non
     return root / name
 
 
-def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: float | None, fos) -> list[str]:
+def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: float | None, fos,
+            toe: float = 45.0, base: float = 15.0) -> list[str]:
+    """Every extent named, so that the variants differ in the crest and the bands alone (the
+    case's own defaults differ by angle)."""
     exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
     if (out / "checkpoint.npz").exists():
         return exe + ["--resume", str(out)]
-    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos)]
-    if crest != DEFAULT_CREST:
-        argv += ["--crest-length", f"{crest:g}"]
-    if band is not None:
-        argv += ["--boundary-band", f"{band:g}"]
+    argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
+                  "--crest-length", f"{crest:g}", "--toe-length", f"{toe:g}", "--base-depth", f"{base:g}",
+                  "--boundary-band", f"{band or 0:g}"]
     # only the bracket and its mechanism matter here: a short runout
     return argv + ["--runout-time", "0.5", "--threads", "1", "--quiet", "--yes", "--out", str(out)]
 

@@ -47,7 +47,7 @@ from fdem.geometry.polygons import simple_slope
 from fdem.physics.crack_properties import CrackProperties
 from fdem.io.jsonable import write_json
 
-__all__ = ["four_slope_property_sets", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
+__all__ = ["four_slope_property_sets", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
            "ground_surface", "simulation", "scene", "main", "YOUNG", "POISSON", "DENSITY"]
 
@@ -125,6 +125,42 @@ def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_l
 
         fabric = BandedSet(fabric, boundary_band)
     return Geometry([slope], [fabric], min_joint_length=min_joint_length)
+
+
+RUN_EXTENTS = {
+    "low": {"crest_length": 4 * FOUR_SLOPE_HEIGHT, "toe_length": 6 * FOUR_SLOPE_HEIGHT,
+            "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": None},
+    "high": {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
+             "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": 5.0},
+}
+"""The extents [m] a run of the case uses unless told (``docs/cases.md`` A, "Boundaries"), chosen
+so that the boundaries take no part. Low angle: the persistent joint through the toe rises at 15
+deg and meets the crest 56 m behind the toe; with a crest of 2 H it met the right-hand roller
+instead, and the whole package above it slid off that roller (1.0 m, 2026-11-24), so the crest is
+4 H; the debris ran 44 m and off the end of a 3 H floor, so the floor is 6 H. High angle: joints
+dipping into the model break beside the right-hand roller already at F = 1 (23 elements at
+1.0 m), and 5 m bands of intact rock along the sides stop it. :func:`four_slope_geometry`
+keeps the smaller extents of its own defaults (the verification tests and benchmarks use them)."""
+
+EXTENTS_BEFORE_PINNING = {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
+                          "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": None}
+"""The extents of runs begun before ``run.json`` named them (a resumed run keeps its mesh)."""
+
+def resolve_extents(angle: str, given: dict, began_with: list[str] | None = None) -> dict:
+    """The extents [m] of a run: ``given`` (``None`` where not given; a band of 0 is none), else
+    :data:`RUN_EXTENTS` of ``angle``; for a resumed run whose first command line ``began_with``
+    does not name an extent, the defaults of then (:data:`EXTENTS_BEFORE_PINNING`), so that it
+    rebuilds the mesh its checkpoint belongs to. A bad value is a ``ValueError`` naming its option."""
+    extents = {}
+    for k, default in RUN_EXTENTS[angle].items():
+        flag, v = "--" + k.replace("_", "-"), given.get(k)
+        if v is None:
+            v = EXTENTS_BEFORE_PINNING[k] if began_with is not None and flag not in began_with else default
+        elif not (math.isfinite(v) and (v > 0 or k == "boundary_band" and v == 0)):
+            raise ValueError(f"{flag} must be a positive number of metres{' (0: none)' if k == 'boundary_band' else ''},"
+                             f" got {v}")
+        extents[k] = None if k == "boundary_band" and not v else v
+    return extents
 
 
 NAME = "four-slopes"
@@ -244,15 +280,17 @@ def main(argv=None) -> dict:
                         help="persistent joints relative to the toe, a fraction of the spacing: 0 puts one "
                              "through the toe, 0.5 the toe midway (default: 0 fine, 0.5 coarse)")
     parser.add_argument("--refine", type=float, default=None, help="element size factor on joints, e.g. 0.5")
-    H = FOUR_SLOPE_HEIGHT
-    for name, default, what in (("crest-length", 2 * H, "crest plateau behind the face"),
-                                ("toe-length", 3 * H, "floor in front of the toe"),
-                                ("base-depth", H, "rock below the toe")):
+    low, high = RUN_EXTENTS["low"], RUN_EXTENTS["high"]
+    for name, what in (("crest-length", "crest plateau behind the face"), ("toe-length", "floor in front of the toe"),
+                       ("base-depth", "rock below the toe")):
+        key = name.replace("-", "_")
         parser.add_argument(f"--{name}", type=float, default=None, metavar="METRES",
-                            help=f"{what} [m] (default {default:g}; larger to show the boundaries take no part)")
+                            help=f"{what} [m] (default {low[key]:g} low angle, {high[key]:g} high angle: far enough "
+                                 f"that the boundaries take no part; larger to show it)")
     parser.add_argument("--boundary-band", type=float, default=None, metavar="METRES",
-                        help="keep the joints out of bands of intact rock this wide along the left and right "
-                             "boundaries (default none), so that slip at the rollers is not part of the mechanism")
+                        help=f"keep the joints out of bands of intact rock this wide along the left and right "
+                             f"boundaries, so that slip at the rollers is not part of the mechanism (default: none "
+                             f"low angle, {high['boundary_band']:g} high angle; 0 for none)")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
     parser.add_argument("--tensile", choices=["reduced", "kept"], default=None,
@@ -293,15 +331,16 @@ def main(argv=None) -> dict:
     if resuming and "--runout-dt-fraction" not in began_with:
         args.runout_dt_fraction = 0.4  # the runout's factor before it became 0.8
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
+    try:
+        extents = resolve_extents(args.angle, {k: getattr(args, k) for k in EXTENTS_BEFORE_PINNING},
+                                  began_with if resuming else None)
+    except ValueError as err:
+        parser.error(str(err))
     if not resuming:
+        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + [
+            ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
         args.run_record["argv"] = list(args.run_record["argv"]) + [
-            a for flag, value in (("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)))
-            if flag not in args.run_record["argv"] for a in (flag, value)]
-    extents = {k: getattr(args, k) for k in ("crest_length", "toe_length", "base_depth", "boundary_band")
-               if getattr(args, k) is not None}
-    for k, v in extents.items():
-        if not (math.isfinite(v) and v > 0):
-            parser.error(f"--{k.replace('_', '-')} must be a positive number of metres, got {v}")
+            a for flag, value in pinned if flag not in args.run_record["argv"] for a in (flag, value)]
     from fdem.workflow.slope import SlopeWorkflow
 
     try:  # the workflow's settings are checked now, not after hours of stages
@@ -362,8 +401,7 @@ def main(argv=None) -> dict:
     say("wrote " + ", ".join(map(str, written)))
     joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
     summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset, "tensile": tensile,
-               "extents_m": {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
-                             "base_depth": FOUR_SLOPE_HEIGHT, **extents},
+               "extents_m": dict(extents),
                "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
                "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
 

@@ -6,6 +6,7 @@ and the key.
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -212,6 +213,36 @@ def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_ba
     with pytest.raises(SystemExit) as exit_:
         four_slopes.main(["--base-depth", "0", "--out", str(tmp_path / "x")])
     assert exit_.value.code == 2 and "--base-depth must be a positive number of metres" in capsys.readouterr().err
+
+
+def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them(tmp_path):
+    """A run's extents default by angle (the low-angle slope's toe joint must daylight on the crest
+    and its debris fit on the floor; the high-angle slope's joints must not meet the rollers), are
+    written into run.json so that a resumed run rebuilds the same mesh, and a run begun before they
+    were written resumes with the extents of then."""
+    from fdem.cases import four_slopes as fs
+
+    H = fs.FOUR_SLOPE_HEIGHT
+    none = dict.fromkeys(fs.EXTENTS_BEFORE_PINNING)
+    low = fs.resolve_extents("low", none)
+    assert (low["crest_length"], low["toe_length"], low["boundary_band"]) == (4 * H, 6 * H, None)
+    # the low-angle toe joint (15 deg through the toe) reaches the crest surface inside the model
+    assert H / math.tan(math.radians(fs.FOUR_SLOPE_JOINT_DIP["low"])) - H < low["crest_length"]
+    assert fs.resolve_extents("high", none)["boundary_band"] == 5.0
+    assert fs.resolve_extents("high", {**none, "boundary_band": 0.0})["boundary_band"] is None
+    assert fs.resolve_extents("low", none, began_with=["--angle", "low"]) == fs.EXTENTS_BEFORE_PINNING
+    assert fs.resolve_extents("low", {**none, "crest_length": 90.0}, began_with=["--crest-length", "90"]) == {
+        **fs.EXTENTS_BEFORE_PINNING, "crest_length": 90.0}
+    with pytest.raises(ValueError, match="--toe-length must be a positive"):
+        fs.resolve_extents("low", {**none, "toe_length": -1.0})
+    out = tmp_path / "mesh_only"
+    summary = fs.main(["--spacing", "coarse", "--size", "3.0", "--max-steps", "0", "--no-pictures", "--quiet",
+                       "--out", str(out)])
+    argv = json.loads((out / "run.json").read_text())["argv"]
+    for flag, value in (("--crest-length", "60"), ("--toe-length", "90"), ("--base-depth", "15"),
+                        ("--boundary-band", "0")):
+        assert argv[argv.index(flag) + 1] == value
+    assert summary["extents_m"] == low
 
 
 def test_four_slopes_side_bands_go_into_the_scene_file(tmp_path):
