@@ -99,7 +99,10 @@ def row(summary: dict) -> dict:
         "kinetic_final_J_per_m": (summary.get("kinetic_energy") or {}).get("final_J_per_m") if went_to_rest else None,
         "broken_rock": (tags.get("rock") or {}).get("broken"), "broken_joints": (tags.get("joints") or {}).get("broken"),
         "locked_area_m2": (summary.get("locked") or {}).get("area_m2") if went_to_rest else None,
-        "steps": summary.get("steps"), "wall_seconds": summary.get("seconds_simulation"),
+        # every stage's wall time and the bisection's: a resumed run's seconds_simulation is its last part only
+        "steps": summary.get("steps"),
+        "wall_seconds": sum(st.get("wall_seconds", 0.0) for st in wf.get("stages", [])) + (fos.get("wall_seconds") or 0.0),
+        "runout_ending": runout_stage["reason"] if runout_stage else None,
     }
 
 
@@ -107,7 +110,7 @@ def table(root: Path) -> list[dict]:
     rows = []
     for path in sorted(root.glob("*/summary.json")):
         s = json.loads(path.read_text())
-        if s.get("case") == "four-slopes" and s.get("workflow"):
+        if s.get("case") == "four-slopes" and s.get("workflow") and finished(path.parent):
             rows.append({**row(s), "folder": str(path.parent)})
     rows.sort(key=lambda r: (r["scene"] or "", -(r["size_m"] or 0)))
     return rows
@@ -185,7 +188,8 @@ def main(argv=None) -> list[dict]:
     print_table(rows)
     TABLE.parent.mkdir(parents=True, exist_ok=True)
     old = json.loads(TABLE.read_text()) if TABLE.exists() else {"rows": []}
-    keep = [r for r in old["rows"] if r["folder"] not in {x["folder"] for x in rows}]
+    # this root's rows are read afresh (a run stopped part-way has none); other roots' are kept
+    keep = [r for r in old["rows"] if Path(r["folder"]).parent != args.root]
     TABLE.write_text(json.dumps({"command": "python cases/benchmarks/convergence_four_slopes.py "
                                             + " ".join(sys.argv[1:] if argv is None else argv),
                                  "rows": keep + rows}, indent=1))
