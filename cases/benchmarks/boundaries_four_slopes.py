@@ -79,7 +79,9 @@ def row(summary: dict, fos_json: dict | None) -> dict:
         "fos": fos.get("fos"), "bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
         "trials": [[t["factor"], t["stable"], t.get("n_broken")] for t in fos.get("trials", [])],
         "failing_trial_broken": (fos_json or {}).get("failure_broken_elements"),
-        "wall_seconds": summary.get("seconds_simulation"),
+        # every stage's wall time and the bisection's (a resumed run's seconds_simulation is its last part)
+        "wall_seconds": sum(st.get("wall_seconds", 0.0) for st in stages) + (fos.get("wall_seconds") or 0.0),
+        "outcome": summary.get("outcome"),
     }
 
 
