@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from convergence_four_slopes import finished  # noqa: E402  (a run stopped part-way is resumed, not read)
+from convergence_four_slopes import finished, save_table  # noqa: E402  (a run stopped part-way is resumed, not read)
 
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "docs" / "cases" / "four_slopes_boundaries.json"
@@ -149,13 +149,7 @@ def main(argv=None) -> list[dict]:
                                stderr=subprocess.STDOUT, cwd=ROOT, check=False)
     rows = table(args.root)
     print_table(rows)
-    TABLE.parent.mkdir(parents=True, exist_ok=True)
-    old = json.loads(TABLE.read_text()) if TABLE.exists() else {"rows": []}
-    keep = [r for r in old["rows"] if r["folder"] not in {x["folder"] for x in rows}]
-    TABLE.write_text(json.dumps({"command": "python cases/benchmarks/boundaries_four_slopes.py "
-                                            + " ".join(sys.argv[1:] if argv is None else argv),
-                                 "rows": keep + rows}, indent=1))
-    print(f"wrote {TABLE}")
+    save_table(TABLE, "boundaries_four_slopes.py", argv, rows, args.root)
     return rows
 
 

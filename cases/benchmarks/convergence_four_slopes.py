@@ -186,15 +186,21 @@ def main(argv=None) -> list[dict]:
                         args.runout_time, model)
     rows = table(args.root)
     print_table(rows)
-    TABLE.parent.mkdir(parents=True, exist_ok=True)
-    old = json.loads(TABLE.read_text()) if TABLE.exists() else {"rows": []}
-    # this root's rows are read afresh (a run stopped part-way has none); other roots' are kept
-    keep = [r for r in old["rows"] if Path(r["folder"]).parent != args.root]
-    TABLE.write_text(json.dumps({"command": "python cases/benchmarks/convergence_four_slopes.py "
-                                            + " ".join(sys.argv[1:] if argv is None else argv),
-                                 "rows": keep + rows}, indent=1))
-    print(f"wrote {TABLE}")
+    save_table(TABLE, "convergence_four_slopes.py", argv, rows, args.root)
     return rows
+
+
+def save_table(path: Path, script: str, argv, rows: list[dict], root: Path) -> None:
+    """Write ``rows`` (those of the runs under ``root``) into the JSON table ``path`` with the
+    command that made it: this root's rows are read afresh (a run stopped part-way has none),
+    other roots' are kept."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    old = json.loads(path.read_text()) if path.exists() else {"rows": []}
+    keep = [r for r in old["rows"] if Path(r["folder"]).parent != root]
+    path.write_text(json.dumps({"command": f"python cases/benchmarks/{script} "
+                                           + " ".join(sys.argv[1:] if argv is None else argv),
+                                "rows": keep + rows}, indent=1))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

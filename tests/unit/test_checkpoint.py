@@ -250,6 +250,18 @@ def test_a_checkpoint_written_by_the_flat_layout_loads_and_runs_on(reference):
     np.testing.assert_allclose(sim.state.x, ref[0].state.x, rtol=0, atol=1e-6 * scale)
 
 
+def continues_and_refuses_other_friction(ref, again, path) -> None:
+    """``again`` (loaded from ``path``) runs on to ``ref``'s state bit for bit, and a model whose
+    face friction is lower or higher than the one it ran with is refused."""
+    run(again[0], HALF)
+    assert_same(ref, again)
+    for phi in (25.0, 35.0):
+        other = scene(rock_phi=20.0)
+        other[2].set_friction(friction_angle=phi)
+        with pytest.raises(ValueError, match="contact parameters"):
+            ck.load_checkpoint(other[0], path)
+
+
 def test_a_run_whose_breakage_lowered_face_friction_resumes(tmp_path):
     """Broken faces take the crack's residual friction (20 deg here, below the faces' 30 deg):
     the face friction then differs from the one a fresh model is built with. That is state,
@@ -266,13 +278,7 @@ def test_a_run_whose_breakage_lowered_face_friction_resumes(tmp_path):
     again = scene(rock_phi=20.0)
     ck.load_checkpoint(again[0], path)
     assert int((again[2].mu_tri < again[2].face_mu).sum()) == lowered
-    run(again[0], HALF)
-    assert_same(ref, again)
-    for phi in (25.0, 35.0):  # a face friction lower or higher than the one it ran with
-        other = scene(rock_phi=20.0)
-        other[2].set_friction(friction_angle=phi)
-        with pytest.raises(ValueError, match="contact parameters"):
-            ck.load_checkpoint(other[0], path)
+    continues_and_refuses_other_friction(ref, again, path)
 
 
 def test_a_checkpoint_fingerprinted_with_lowered_friction_still_resumes(tmp_path):
@@ -289,10 +295,4 @@ def test_a_checkpoint_fingerprinted_with_lowered_friction_still_resumes(tmp_path
     first[2].face_mu = as_built
     again = scene(rock_phi=20.0)
     ck.load_checkpoint(again[0], path)
-    run(again[0], HALF)
-    assert_same(ref, again)
-    for phi in (25.0, 35.0):  # a face friction lower or higher than the one it ran with
-        other = scene(rock_phi=20.0)
-        other[2].set_friction(friction_angle=phi)
-        with pytest.raises(ValueError, match="contact parameters"):
-            ck.load_checkpoint(other[0], path)
+    continues_and_refuses_other_friction(ref, again, path)
