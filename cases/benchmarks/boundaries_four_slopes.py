@@ -73,7 +73,8 @@ def row(summary: dict, fos_json: dict | None) -> dict:
     ext = summary.get("extents_m") or {}
     return {
         "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
-        "crest_length_m": ext.get("crest_length"), "side_band_m": ext.get("boundary_band"),
+        "crest_length_m": ext.get("crest_length"), "toe_length_m": ext.get("toe_length"),
+        "side_band_m": ext.get("boundary_band"),
         "equilibrium": eq.get("reason"), "broken_at_F1": eq.get("n_broken"),
         "failed_at_F1": summary.get("failed_at_factor") == 1.0,
         "fos": fos.get("fos"), "bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
@@ -85,31 +86,53 @@ def row(summary: dict, fos_json: dict | None) -> dict:
     }
 
 
+def extents_from_command(folder: Path) -> dict:
+    """The extents a run's ``run.json`` command names, the defaults of runs begun before they were
+    named (crest 30, floor 45, base 15, no bands) for the others."""
+    argv = json.loads((folder / "run.json").read_text()).get("argv", [])
+    given = {a: float(argv[i + 1]) for i, a in enumerate(argv[:-1])
+             if a in ("--crest-length", "--toe-length", "--base-depth", "--boundary-band")}
+    band = given.get("--boundary-band")
+    return {"crest_length": given.get("--crest-length", DEFAULT_CREST), "toe_length": given.get("--toe-length", 45.0),
+            "base_depth": given.get("--base-depth", 15.0), "boundary_band": band or None}
+
+
 def table(root: Path) -> list[dict]:
     rows = []
-    for path in sorted(root.glob("*/summary.json")):
-        s = json.loads(path.read_text())
-        if s.get("case") != "four-slopes" or not s.get("workflow"):
+    for folder in sorted(p.parent for p in root.glob("*/run.json")):
+        fj = folder / "fos.json"
+        fos_json = json.loads(fj.read_text()) if fj.exists() else None
+        if (folder / "summary.json").exists():
+            s = json.loads((folder / "summary.json").read_text())
+            if s.get("case") != "four-slopes" or not s.get("workflow"):
+                continue
+        elif fos_json is not None:  # still running (its runout) with its bisection done: the bracket is known
+            argv = json.loads((folder / "run.json").read_text()).get("argv", [])
+            opt = {a: argv[i + 1] for i, a in enumerate(argv[:-1]) if a.startswith("--")}
+            scene = f"{opt.get('--angle', 'low')}_{opt.get('--spacing', 'fine')}"
+            import numpy as np
+
+            with np.load(folder / f"{scene}.npz") as mesh:
+                n_triangles = int(mesh["triangles"].shape[0])
+            s = {"case": "four-slopes", "scene": scene, "size_m": float(opt.get("--size", 0.5)),
+                 "n_triangles": n_triangles, "workflow": {"fos": fos_json, "stages": []}, "outcome": "running"}
+        else:
             continue
-        if not s.get("extents_m"):  # a run from before summaries named their extents: its command does
-            argv = json.loads((path.parent / "run.json").read_text()).get("argv", [])
-            given = {a: float(argv[i + 1]) for i, a in enumerate(argv[:-1]) if a in ("--crest-length", "--boundary-band")}
-            s["extents_m"] = {"crest_length": given.get("--crest-length", DEFAULT_CREST),
-                              "boundary_band": given.get("--boundary-band")}
-        fj = path.parent / "fos.json"
-        rows.append({**row(s, json.loads(fj.read_text()) if fj.exists() else None), "folder": str(path.parent)})
+        if not (s.get("extents_m") or {}).get("toe_length"):  # summaries of older runs do not name them all
+            s["extents_m"] = extents_from_command(folder)
+        rows.append({**row(s, fos_json), "folder": str(folder)})
     rows.sort(key=lambda r: (r["scene"] or "", r["size_m"] or 0, r["crest_length_m"] or 0, r["side_band_m"] or 0))
     return rows
 
 
 def print_table(rows: list[dict]) -> None:
-    print("| scene | size | crest | side bands | triangles | broken at F = 1 | FoS (bisection) | bracket | wall |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| scene | size | crest | floor | side bands | triangles | broken at F = 1 | FoS (bisection) | bracket | wall |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         b = r["bracket"] or [None, None]
         bracket = ("fails at F = 1" if r["failed_at_F1"] else
                    f"{'-' if b[0] is None else format(b[0], '.4g')}-{'-' if b[1] is None else format(b[1], '.4g')}")
-        print(f"| {r['scene']} | {r['size_m']:g} m | {r['crest_length_m']:g} m | "
+        print(f"| {r['scene']} | {r['size_m']} m | {r['crest_length_m']:g} m | {r['toe_length_m']:g} m | "
               f"{'-' if r['side_band_m'] is None else format(r['side_band_m'], 'g') + ' m'} | {r['n_triangles']} | "
               f"{r['broken_at_F1']} | {'-' if r['fos'] is None else format(r['fos'], '.3f')} | "
               f"{bracket} | "
