@@ -139,7 +139,9 @@ deg and meets the crest 56 m behind the toe; with a crest of 2 H it met the righ
 instead, and the whole package above it slid off that roller (1.0 m, 2026-11-24), so the crest is
 4 H; the debris ran 44 m and off the end of a 3 H floor, so the floor is 6 H. High angle: joints
 dipping into the model break beside the right-hand roller already at F = 1 (23 elements at
-1.0 m), and 5 m bands of intact rock along the sides stop it. :func:`four_slope_geometry`
+1.0 m), and 5 m bands of intact rock along the sides stop it there; in a model with a crest of
+4 H one joint 7-13 m inside the band still breaks at F = 1, so the high-angle treatment is not
+settled (``docs/cases.md`` A, "Boundaries"). :func:`four_slope_geometry`
 keeps the smaller extents of its own defaults (the verification tests and benchmarks use them)."""
 
 EXTENTS_BEFORE_PINNING = {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
