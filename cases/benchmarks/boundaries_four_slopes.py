@@ -24,12 +24,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from convergence_four_slopes import finished, save_table  # noqa: E402  (a run stopped part-way is resumed, not read)
 
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "docs" / "cases" / "four_slopes_boundaries.json"
-DEFAULT_CREST = 30.0
+# the variants share the extents of runs begun before they were named (crest 2H, floor 3H, base H):
+# one source, the case's own
+from fdem.cases.four_slopes import EXTENTS_BEFORE_PINNING as BASE_EXTENTS  # noqa: E402
+
+DEFAULT_CREST = BASE_EXTENTS["crest_length"]
 
 
 def parse_variant(text: str) -> tuple[float, float | None]:
@@ -51,7 +57,7 @@ def folder(root: Path, angle: str, spacing: str, crest: float, band: float | Non
 
 
 def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: float | None, fos,
-            toe: float = 45.0, base: float = 15.0) -> list[str]:
+            toe: float = BASE_EXTENTS["toe_length"], base: float = BASE_EXTENTS["base_depth"]) -> list[str]:
     """Every extent named, so that the variants differ in the crest and the bands alone (the
     case's own defaults differ by angle)."""
     exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
@@ -93,8 +99,9 @@ def extents_from_command(folder: Path) -> dict:
     given = {a: float(argv[i + 1]) for i, a in enumerate(argv[:-1])
              if a in ("--crest-length", "--toe-length", "--base-depth", "--boundary-band")}
     band = given.get("--boundary-band")
-    return {"crest_length": given.get("--crest-length", DEFAULT_CREST), "toe_length": given.get("--toe-length", 45.0),
-            "base_depth": given.get("--base-depth", 15.0), "boundary_band": band or None}
+    return {"crest_length": given.get("--crest-length", DEFAULT_CREST),
+            "toe_length": given.get("--toe-length", BASE_EXTENTS["toe_length"]),
+            "base_depth": given.get("--base-depth", BASE_EXTENTS["base_depth"]), "boundary_band": band or None}
 
 
 def table(root: Path) -> list[dict]:
@@ -110,8 +117,6 @@ def table(root: Path) -> list[dict]:
             argv = json.loads((folder / "run.json").read_text()).get("argv", [])
             opt = {a: argv[i + 1] for i, a in enumerate(argv[:-1]) if a.startswith("--")}
             scene = f"{opt.get('--angle', 'low')}_{opt.get('--spacing', 'fine')}"
-            import numpy as np
-
             with np.load(folder / f"{scene}.npz") as mesh:
                 n_triangles = int(mesh["triangles"].shape[0])
             s = {"case": "four-slopes", "scene": scene, "size_m": float(opt.get("--size", 0.5)),
