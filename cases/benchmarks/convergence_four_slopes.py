@@ -33,8 +33,11 @@ ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "docs" / "cases" / "four_slopes_convergence.json"
 
 
-def folder(root: Path, angle: str, spacing: str, size: str) -> Path:
-    return root / f"{angle}_{spacing}_{size}"
+def folder(root: Path, angle: str, spacing: str, size: str, joint_offset: float | None = None) -> Path:
+    """``<root>/<angle>_<spacing>_<size>``, with ``_offset<f>`` when the persistent joints are
+    placed explicitly (``--joint-offset``; without it each spacing has its own default)."""
+    suffix = "" if joint_offset is None else f"_offset{joint_offset:g}"
+    return root / f"{angle}_{spacing}_{size}{suffix}"
 
 
 def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, resume: bool,
@@ -87,7 +90,7 @@ def row(summary: dict) -> dict:
     tags = summary.get("cracks_by_tag") or {}
     return {
         "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
-        "extents_m": summary.get("extents_m"),
+        "joint_offset": summary.get("joint_offset"), "extents_m": summary.get("extents_m"),
         "fos_bisection": fos.get("fos"), "bisection_bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
         "n_trials": fos.get("n_trials"),
         "steps_bracket": [max(stable) if stable else None, failed], "outcome": summary.get("outcome"),
@@ -112,7 +115,7 @@ def table(root: Path) -> list[dict]:
         s = json.loads(path.read_text())
         if s.get("case") == "four-slopes" and s.get("workflow") and finished(path.parent):
             rows.append({**row(s), "folder": str(path.parent)})
-    rows.sort(key=lambda r: (r["scene"] or "", -(r["size_m"] or 0)))
+    rows.sort(key=lambda r: (r["scene"] or "", r["joint_offset"] or 0.0, -(r["size_m"] or 0)))
     return rows
 
 
@@ -125,20 +128,21 @@ def fmt(v, spec=".3g") -> str:
 
 
 def print_table(rows: list[dict]) -> None:
-    print("| scene | size | triangles | FoS (bisection) | bracket | steps bracket | outcome | failed area | runout | "
+    print("| scene (joint offset) | size | triangles | FoS (bisection) | bracket | steps bracket | outcome | failed area | runout | "
           "KE peak | broken rock / joints | wall |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     prev = {}
     for r in rows:
         moved = ""
-        p = prev.get(r["scene"])
+        key = (r["scene"], r["joint_offset"])
+        p = prev.get(key)
         if p is not None and r["fos_bisection"] is not None and p["fos_bisection"] is not None:
             moved = f" ({r['fos_bisection'] - p['fos_bisection']:+.3f})"
-        print(f"| {r['scene']} | {fmt(r['size_m'])} m | {fmt(r['n_triangles'])} | {fmt(r['fos_bisection'], '.3f')}{moved} | "
+        print(f"| {r['scene']} ({fmt(r['joint_offset'], 'g')}) | {fmt(r['size_m'])} m | {fmt(r['n_triangles'])} | {fmt(r['fos_bisection'], '.3f')}{moved} | "
               f"{fmt(r['bisection_bracket'])} | {fmt(r['steps_bracket'])} | {r['outcome']} | "
               f"{fmt(r['failed_area_m2'])} | {fmt(r['runout_distance_m'])} | {fmt(r['kinetic_peak_J_per_m'])} | "
               f"{fmt(r['broken_rock'])} / {fmt(r['broken_joints'])} | {fmt(r['wall_seconds'], '.0f')} s |")
-        prev[r["scene"]] = r
+        prev[key] = r
 
 
 def main(argv=None) -> list[dict]:
@@ -157,6 +161,10 @@ def main(argv=None) -> list[dict]:
                         help="crest plateau of every run (fdem run four-slopes --crest-length; default its own)")
     parser.add_argument("--boundary-band", type=float, default=None, metavar="METRES",
                         help="intact side bands of every run (fdem run four-slopes --boundary-band; default none)")
+    parser.add_argument("--joint-offset", type=float, default=None, metavar="FRACTION",
+                        help="persistent joints relative to the toe, a fraction of the spacing, for every run "
+                             "(fdem run four-slopes --joint-offset; default each spacing's own); the folders "
+                             "get the suffix _offset<FRACTION>")
     parser.add_argument("--reduction", choices=["steps", "rate"], default=None,
                         help="the reduction schedule of every run (default the case's: damped steps)")
     parser.add_argument("--root", type=Path, default=Path("runs/convergence"))
@@ -176,14 +184,16 @@ def main(argv=None) -> list[dict]:
     lo, hi, tol = args.fos
     if not (0 < lo < hi and 0 < tol < hi - lo):
         parser.error(f"--fos needs 0 < LOWER < UPPER and 0 < TOL < UPPER - LOWER, got {args.fos}")
+    if args.joint_offset is not None and not 0.0 <= args.joint_offset < 1.0:
+        parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
     model = tuple(a for flag, value in (("--crest-length", args.crest_length), ("--boundary-band", args.boundary_band),
-                                        ("--reduction", args.reduction)) if value is not None
-                  for a in (flag, str(value)))
+                                        ("--joint-offset", args.joint_offset), ("--reduction", args.reduction))
+                  if value is not None for a in (flag, str(value)))
     if not args.table_only:
         for size in args.sizes:  # coarse to fine over all scenes: the cheap rows first
             for angle, spacing in scenes:
-                run_one(folder(args.root, angle, spacing, size), angle, spacing, size, args.fos, args.runout,
-                        args.runout_time, model)
+                run_one(folder(args.root, angle, spacing, size, args.joint_offset), angle, spacing, size, args.fos,
+                        args.runout, args.runout_time, model)
     rows = table(args.root)
     print_table(rows)
     save_table(TABLE, "convergence_four_slopes.py", argv, rows, args.root)
