@@ -1,0 +1,135 @@
+"""Publish one four-slope run into ``docs/cases/rest/``: its summary, its pictures, and the figures
+that ``docs/cases.md`` section A sets beside the paper, as a Markdown table.
+
+A run to rest (or one still going, whose ``summary.json`` says ``interrupted``) is read from its
+folder; ``summary.json`` is copied to ``docs/cases/rest/<name>.json`` and ``mechanism.png``
+(displacement with activated and broken joints at mid-failure and at the end) and
+``kinetic_energy.png`` to ``docs/cases/rest/<name>_<picture>.png``. The table printed holds the
+run's own figures only (what the paper says goes in by hand, beside them), every figure read from
+the summary, so that a row is never typed twice:
+
+    python cases/benchmarks/publish_four_slopes.py runs/rest2/low_fine_1.0_crest60_toe90
+    python cases/benchmarks/publish_four_slopes.py runs/rate/high_fine_0.5_band5 --name high_fine_0.5_band5_rate
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs" / "cases" / "rest"
+PICTURES = ("mechanism", "kinetic_energy")
+
+
+def default_name(summary: dict) -> str:
+    """``<scene>_<size>[_crest<C>][_toe<T>][_band<B>][_offset<f>]`` from the summary's own figures."""
+    ext = summary.get("extents_m") or {}
+    name = f"{summary['scene']}_{summary['size_m']}"  # 1.0, 0.5: as the run folders spell sizes
+    for key, tag in (("crest_length", "crest"), ("toe_length", "toe"), ("boundary_band", "band")):
+        if ext.get(key):
+            name += f"_{tag}{ext[key]:g}"
+    if summary.get("joint_offset") not in (None, 0.0) or summary.get("scene", "").endswith("coarse"):
+        name += f"_offset{summary.get('joint_offset') or 0:g}"
+    return name
+
+
+def _mode(d: dict) -> str:
+    m = d.get("broken_by_mode") or d.get("by_mode") or {}
+    return f"I {m.get('I', 0)} / II {m.get('II', 0)} / mixed {m.get('mixed', 0)}"
+
+
+def figures(summary: dict) -> list[tuple[str, str]]:
+    """(row, this run) pairs of the beside-the-paper table, read from ``summary``."""
+    wf = summary.get("workflow") or {}
+    stages = wf.get("stages") or []
+    fos = wf.get("fos") or {}
+    run = summary.get("runout") or {}
+    ke = summary.get("kinetic_energy") or {}
+    tags = summary.get("cracks_by_tag") or {}
+    rock, joints = tags.get("rock") or {}, tags.get("joints") or {}
+    frag = summary.get("fragments") or {}
+    locked = summary.get("locked") or {}
+    mid = summary.get("mid_failure") or {}
+    last = stages[-1] if stages else {}
+    converged = [st["reduction"] for st in stages if st["reason"] == "converged" and not st["name"].startswith("runout")]
+    crept = wf.get("crept_at_factors") or ([wf["crept_at_factor"]] if wf.get("crept_at_factor") else [])
+    rows = []
+    strength = []
+    if fos.get("fos") is not None:
+        b = fos.get("bracket") or [None, None]
+        strength.append(f"bisection {fos['fos']:.3f} ({b[0]:.4g}-{b[1]:.4g}, tolerance {fos.get('tolerance'):g})")
+    if any(st["name"].startswith("reduction_rate") or st["name"].startswith("rate") for st in stages):
+        strength.append(f"the paper's rate to F = {wf.get('final_reduction', 0):.3g}")
+    elif converged:
+        failed = wf.get("failed_at_factor")
+        strength.append(f"damped steps {max(converged + crept):.4g}-{'-' if failed is None else format(failed, '.4g')}"
+                        + (f", crept and stopped at {', '.join(format(c, '.4g') for c in crept)}" if crept else ""))
+    rows.append(("strength reduction", "; ".join(strength) or "-"))
+    rows.append(("maximum displacement", f"{run.get('max_displacement_m', 0):.3g} m (D50 {run.get('p50_displacement_m', 0):.3g} m, "
+                                         f"D90 {run.get('p90_displacement_m', 0):.3g} m of the displaced mass)"))
+    off = run.get("off_model_area_m2") or 0.0
+    rows.append(("runout beyond the toe", f"{run.get('runout_distance_m', 0):.3g} m (99th percentile by area), front "
+                                          f"{run.get('runout_front_max_m', 0):.3g} m"
+                                          + (f"; {off:.3g} m^2 left the model: a lower bound" if off > 0 else "")))
+    rows.append(("volume", f"{run.get('displaced_area_m2', 0):.3g} m^2 displaced more than 0.1 m (per metre)"))
+    rows.append(("kinetic energy", f"peak {ke.get('peak_J_per_m', 0) / 1e6:.3g} MJ/m, {ke.get('final_J_per_m', 0) / 1e3:.3g} kJ/m at the end; "
+                                   f"gravity released {ke.get('released_gravity_J_per_m', 0) / 1e6:.3g} MJ/m, "
+                                   f"fracture {ke.get('fracture_J_per_m', 0) / 1e6:.3g} MJ/m"))
+    rows.append(("breakage", f"{(summary.get('cracks') or {}).get('broken', 0):,} broken: intact rock {rock.get('broken', 0):,} "
+                             f"({_mode(rock)}), joints {joints.get('broken', 0):,} ({_mode(joints)}); "
+                             f"{rock.get('activated', 0) + joints.get('activated', 0):,} activated, unbroken"))
+    if frag:
+        rows.append(("fragments", f"{frag.get('n_fragments', 0):,}, {frag.get('n_blocks', 0):,} of them blocks of more "
+                                  f"than one triangle"))
+    rows.append(("locked mass", f"{locked.get('area_m2', 0):.3g} m^2 ({100 * locked.get('share_of_failed', 0):.3g} % of "
+                                f"the failed mass)" if locked else "-"))
+    if mid:
+        rows.append(("mid-failure picture", f"t = {mid['time_s']:.3g} s, D90 {mid['d90_m']:.3g} m"))
+    stopped = summary.get("outcome") in ("interrupted", "unstable", "write_error")
+    at_rest = not stopped and last.get("name", "").startswith("runout") and last.get("reason") == "converged"
+    if stopped:  # the stage under way is not among the finished ones
+        rest = f"no: {summary.get('ending') or summary.get('outcome')}, a run still going (it resumes)"
+    else:
+        rest = (("yes" if at_rest else "no") + f": the last stage ({last.get('name', '-')}) ended "
+                f"{last.get('reason')} at t = {last.get('t_end', 0):.3g} s")
+    rows.append(("at rest?", rest))
+    walls = sum(st.get("wall_seconds", 0.0) for st in stages) + (fos.get("wall_seconds") or 0.0)
+    rows.append(("run", f"{summary.get('n_triangles', 0):,} triangles, {summary.get('steps', 0):,} steps to "
+                        f"t = {summary.get('simulated_time_s', 0):.3g} s, {walls:,.0f} s of wall time"
+                        + (" in the finished stages" if stopped else "")
+                        + f" on {summary.get('threads', '?')} CPU thread(s)"))
+    return rows
+
+
+def main(argv=None) -> list[tuple[str, str]]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", type=Path, help="the run's folder (holding summary.json)")
+    parser.add_argument("--name", default=None, help="the name in docs/cases/rest (default from the summary)")
+    parser.add_argument("--dry-run", action="store_true", help="print the table, copy nothing")
+    args = parser.parse_args(argv)
+    path = args.run / "summary.json"
+    if not path.exists():
+        parser.error(f"{path} does not exist: a run writes its summary when it ends or is stopped")
+    summary = json.loads(path.read_text())
+    if summary.get("case") != "four-slopes" or not summary.get("workflow"):
+        parser.error(f"{path} is not the summary of a four-slope workflow run")
+    name = args.name or default_name(summary)
+    rows = figures(summary)
+    print(f"| | this run: {name} |\n|---|---|")
+    for k, v in rows:
+        print(f"| {k} | {v} |")
+    if not args.dry_run:
+        DOCS.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, DOCS / f"{name}.json")
+        for pic in PICTURES:
+            if (args.run / f"{pic}.png").exists():
+                shutil.copyfile(args.run / f"{pic}.png", DOCS / f"{name}_{pic}.png")
+        print(f"wrote {DOCS.relative_to(ROOT)}/{name}.json and its pictures", file=sys.stderr)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
