@@ -105,7 +105,8 @@ from numba import njit, prange
 __all__ = ["N_OUT", "N_WORK", "MAX_VERT", "N_COL", "N_HIST", "FASTMATH", "TOUCH_EPS", "CLOSE_TOL",
            "PARALLEL_MIN_PAIRS", "N_IWORK", "pair_normal", "tangential_law", "chunk_bounds", "pair_forces",
            "overlap_areas", "gather_forces", "target_incidence", "carry_history", "lower_bound", "pair_constants_one",
-           "pair_constants", "crack_friction", "crack_between", "carry_row", "carry_history_one"]
+           "pair_constants", "crack_friction", "crack_between", "carry_row", "carry_history_one", "FROM_FACES",
+           "facing_face", "pair_friction"]
 
 
 N_OUT = 12
@@ -123,6 +124,11 @@ a convex polygon; the bound also covers round-off on degenerate ones)."""
 
 
 N_COL = 8
+
+
+FROM_FACES = -1.0
+"""Base friction of a pair that takes it from the two faces in touch (:func:`pair_friction`):
+every pair but those across a broken crack element, which keep that element's friction."""
 
 
 N_HIST = 10
@@ -602,6 +608,53 @@ def _overlap_clip(c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y,
     return (e, area, gx, gy, gtx, gty, bc0x, bc0y, bc1x, bc1y, bc2x, bc2y, bt0x, bt0y, bt1x, bt1y, bt2x, bt2y)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def facing_face(p0x, p0y, p1x, p1y, p2x, p2y, nx, ny):
+    """The face of a counter-clockwise triangle that looks most nearly along ``(nx, ny)``: the
+    ``k`` (edge from corner ``k`` to corner ``k + 1``) whose outward unit normal
+    ``(e_y, -e_x) / |e|`` has the largest dot product with ``(nx, ny)``."""
+    ex = p1x - p0x
+    ey = p1y - p0y
+    best = 0
+    cos_best = (ey * nx - ex * ny) / math.sqrt(ex * ex + ey * ey)
+    ex = p2x - p1x
+    ey = p2y - p1y
+    c = (ey * nx - ex * ny) / math.sqrt(ex * ex + ey * ey)
+    if c > cos_best:
+        best = 1
+        cos_best = c
+    ex = p0x - p2x
+    ey = p0y - p2y
+    c = (ey * nx - ex * ny) / math.sqrt(ex * ex + ey * ey)
+    if c > cos_best:
+        best = 2
+    return best
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def pair_friction(mu_pair, face_mu, i, j, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y, t2x, t2y, nx, ny):
+    """Base Coulomb coefficient of a touching pair (contactor ``i`` with corners ``c``, target
+    ``j`` with corners ``t``): ``mu_pair`` when the pair has its own (across a broken crack
+    element: that element's residual friction), else (``mu_pair = FROM_FACES``) the lower
+    friction of the two faces in touch, ``min(face_mu[i, k_i], face_mu[j, k_j])``: ``k_i`` the
+    face of ``i`` that looks along ``-n``, ``k_j`` the face of ``j`` that looks along ``n``, with
+    ``n = (nx, ny)`` the unit normal of the contact force on ``i`` (it pushes ``i`` away from
+    ``j``). A triangle whose three faces have one friction needs no face picked.
+
+    Friction belongs to the surfaces that slide on each other: a block with one face on a
+    smooth joint (phi = 11 deg) and another, broken through rock, on the floor slides on the
+    floor at the rock's friction, not the joint's."""
+    if mu_pair >= 0.0:
+        return mu_pair
+    fi = face_mu[i, 0]
+    if face_mu[i, 1] != fi or face_mu[i, 2] != fi:
+        fi = face_mu[i, facing_face(c0x, c0y, c1x, c1y, c2x, c2y, -nx, -ny)]
+    fj = face_mu[j, 0]
+    if face_mu[j, 1] != fj or face_mu[j, 2] != fj:
+        fj = face_mu[j, facing_face(t0x, t0y, t1x, t1y, t2x, t2y, nx, ny)]
+    return min(fi, fj)
+
+
 @njit(cache=True, error_model="numpy")
 def tangential_law(ft, du, kt, cap):
     """Incremental tangential penalty with a Coulomb cap (return mapping), one pair.
@@ -624,8 +677,8 @@ def tangential_law(ft, du, kt, cap):
 
 # ----------------------------------------------------------------------------- pair loop
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
-def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, witness,
-                f, w, iw, pool):
+def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu_base, face_mu, inv_f, kt_pair, damp, dt, spring, f_t,
+                touching, witness, f, w, iw, pool):
     """The pair loop of :func:`pair_forces` over ``q in [lo, hi)`` (``lo`` and ``hi`` at changes of
     ``pair_i``): adds the contactors' forces into ``f``, stores the targets' in ``f_t``; returns
     the four energy sums."""
@@ -693,7 +746,11 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
         b0 = 0.0
         b1 = 0.0
         b2 = 0.0
-        if fn <= 0.0 or (mu[q] <= 0.0 and damp[q] <= 0.0):
+        mu = 0.0
+        if fn > 0.0:
+            mu = inv_f * pair_friction(mu_base[q], face_mu, i, j, c0x, c0y, c1x, c1y, c2x, c2y, t0x, t0y, t1x, t1y,
+                                       t2x, t2y, fx / fn, fy / fn)
+        if fn <= 0.0 or (mu <= 0.0 and damp[q] <= 0.0):
             for r in range(4):
                 spring[q, r] = 0.0
         else:
@@ -729,7 +786,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
             # secant normal stiffness of this pair now, k = F_n^2 / (2E) [Pa]: exact for a flat
             # overlap (E = k d^2 / 2), 3/4 of the tangent one for a corner; vanishes with the overlap
             k_sec = fn * fn / (2.0 * e) if e > 0.0 else 0.0
-            if mu[q] > 0.0 and k_sec > 0.0:
+            if mu > 0.0 and k_sec > 0.0:
                 tx = -ny
                 ty = nx
                 sx = spring[q, 0]
@@ -743,7 +800,7 @@ def _pair_range(lo, hi, x, v, pair_i, pair_j, penalty, mu, kt_pair, damp, dt, sp
                 # mu F_n times the slip of v_{n-1/2} instead is a first-order error in dt that
                 # accumulates while a sticking contact vibrates).
                 c_wf += 0.5 * (sx * wpx + sy * wpy) * dt
-                ft, _ = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu[q] * fn)
+                ft, _ = tangential_law(ft, (vrx * tx + vry * ty) * dt, kt, mu * fn)
                 spring[q, 0] = ft * tx
                 spring[q, 1] = ft * ty
                 c_wf += 0.5 * ft * (tx * vrx + ty * vry) * dt
@@ -814,8 +871,8 @@ def chunk_bounds(pair_i, n_chunks):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching,
-                          witness, f, stride):
+def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu_base, face_mu, inv_f, kt_pair, damp, dt, spring,
+                          f_t, touching, witness, f, stride):
     """Parallel driver of :func:`pair_forces`: (n_chunks, 4) energy sums per chunk of pairs.
     Iteration ``it`` runs chunk ``it * stride mod n_chunks`` (``stride`` coprime, about 0.618
     n_chunks), so each thread's contiguous share of iterations is spread over the whole pair
@@ -827,8 +884,8 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, da
         w = np.empty(N_WORK)
         iw = np.empty(N_IWORK, np.int64)
         pool = np.empty((MAX_VERT, N_COL))
-        a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair, damp,
-                                 dt, spring, f_t, touching, witness, f, w, iw, pool)
+        a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu_base, face_mu, inv_f,
+                                 kt_pair, damp, dt, spring, f_t, touching, witness, f, w, iw, pool)
         sums[ch, 0] = a
         sums[ch, 1] = b
         sums[ch, 2] = c
@@ -837,7 +894,8 @@ def _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, da
 
 
 @njit(cache=True, error_model="numpy")
-def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, witness, f):
+def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu_base, face_mu, inv_f, kt_pair, damp, dt, spring, f_t,
+                touching, witness, f):
     """Contact forces of all candidate pairs: contactors' added into ``f``, targets' stored per pair.
 
     Parameters
@@ -851,8 +909,15 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, sp
         (and forces) are bitwise independent of the thread count.
     penalty : float
         Normal penalty ``p`` [Pa].
-    mu : (n_pairs,) float64
-        Coulomb coefficient ``tan(phi)`` of each pair; 0 skips the friction branch.
+    mu_base : (n_pairs,) float64
+        Base (unreduced) Coulomb coefficient ``tan(phi)`` of each pair that has its own (across a
+        broken crack element), else :data:`FROM_FACES`: the pair then takes the lower friction
+        of the two faces in touch, picked each step by the contact normal (:func:`pair_friction`).
+    face_mu : (n_triangles, 3) float64
+        Base Coulomb coefficient of each triangle's faces (face ``k`` from corner ``k`` to ``k + 1``).
+    inv_f : float
+        ``1 / F``, the strength-reduction factor dividing every coefficient; a pair whose
+        coefficient is 0 skips the friction branch.
     kt_pair : (n_pairs,) float64
         Tangential stiffness of each pair [N/m per m], constant while the pair exists, so the
         tangential spring stores ``f_t^2 / (2 k_t)`` consistently with the work done on it (a
@@ -893,16 +958,16 @@ def pair_forces(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, sp
         stride = max(1, int(0.618 * n_chunks))
         while _gcd(stride, n_chunks) != 1:
             stride += 1
-        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu, kt_pair, damp, dt, spring, f_t,
-                                     touching, witness, f, stride)
+        sums = _pair_chunks_parallel(x, v, pair_i, pair_j, bounds, penalty, mu_base, face_mu, inv_f, kt_pair, damp,
+                                     dt, spring, f_t, touching, witness, f, stride)
     else:
         sums = np.zeros((n_chunks, 4))
         w = np.empty(N_WORK)
         iw = np.empty(N_IWORK, np.int64)
         pool = np.empty((MAX_VERT, N_COL))
         for ch in range(n_chunks):
-            a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair,
-                                     damp, dt, spring, f_t, touching, witness, f, w, iw, pool)
+            a, b, c, d = _pair_range(bounds[ch], bounds[ch + 1], x, v, pair_i, pair_j, penalty, mu_base, face_mu,
+                                     inv_f, kt_pair, damp, dt, spring, f_t, touching, witness, f, w, iw, pool)
             sums[ch, 0] = a
             sums[ch, 1] = b
             sums[ch, 2] = c
@@ -976,20 +1041,21 @@ def lower_bound(keys, key):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def pair_constants_one(q, pair_i, pair_j, crack, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio, mu_base,
+def pair_constants_one(q, pair_i, pair_j, crack, broken, crack_mu, kt_tri, mass_tri, damping_ratio, mu_base,
                        kt_pair, damp_pair):
     """The constants of candidate pair ``q = (i, j)``, written to row ``q``; ``crack`` is the
     crack element between ``i`` and ``j``, or -1 (:func:`crack_between`):
 
     * ``mu_base``: the base (unreduced) Coulomb coefficient: the residual friction ``crack_mu``
-      of that crack element if it is broken, else the lower face friction ``min(mu_tri[i], mu_tri[j])``;
+      of that crack element if it is broken, else :data:`FROM_FACES` (the faces in touch decide,
+      step by step: :func:`pair_friction`);
     * ``kt_pair``: the tangential stiffness ``min(kt_tri[i], kt_tri[j])`` [N/m per m];
     * ``damp_pair``: ``2 xi sqrt(m_i m_j / (m_i + m_j))`` [sqrt(kg/m)] of the triangles'
       masses, 0 without contact damping (``damping_ratio = 0``).
     """
     i = pair_i[q]
     j = pair_j[q]
-    mu_base[q] = crack_friction(crack, broken, crack_mu, min(mu_tri[i], mu_tri[j]))
+    mu_base[q] = crack_friction(crack, broken, crack_mu, FROM_FACES)
     kt_pair[q] = min(kt_tri[i], kt_tri[j])
     if damping_ratio > 0.0:
         mi = mass_tri[i]
@@ -1002,7 +1068,7 @@ def pair_constants_one(q, pair_i, pair_j, crack, mu_tri, broken, crack_mu, kt_tr
 @njit(cache=True, error_model="numpy", inline="always")
 def crack_friction(crack, broken, crack_mu, face):
     """The base friction of a pair: ``crack_mu[crack]`` when crack element ``crack`` between the
-    two triangles is broken, else ``face``, the lower face friction (``crack = -1``: none)."""
+    two triangles is broken, else ``face`` (``crack = -1``: none)."""
     if crack >= 0 and broken[crack]:
         return crack_mu[crack]
     return face
@@ -1021,7 +1087,7 @@ def crack_between(key, crack_keys, crack_order, start):
 
 
 @njit(cache=True, error_model="numpy")
-def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broken, crack_mu, any_broken, kt_tri,
+def pair_constants(pair_i, pair_j, n_tri, crack_keys, crack_order, broken, crack_mu, any_broken, kt_tri,
                    mass_tri, damping_ratio):
     """``(mu_base, kt_pair, damp_pair)`` of every candidate pair (:func:`pair_constants_one`);
     the crack elements between pairs are found by one merge over the sorted keys (pairs sorted by
@@ -1031,7 +1097,7 @@ def pair_constants(pair_i, pair_j, n_tri, mu_tri, crack_keys, crack_order, broke
     kt_pair = np.empty(n)
     damp_pair = np.empty(n)
     for q in range(n):
-        pair_constants_one(q, pair_i, pair_j, -1, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
+        pair_constants_one(q, pair_i, pair_j, -1, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
                            mu_base, kt_pair, damp_pair)
     if any_broken:  # then the pairs across a crack element, found by one merge over the sorted keys
         r = 0

@@ -87,7 +87,7 @@ def partner_fill_kernel(box, active, bond, x, gap, x0, y0, cell, nx, cell_ptr, c
 
 
 @cuda.jit
-def pair_kernel(pair_i, pair_j, n_tri, old_keys, old_hist, keys, hist, touching, mu_tri, crack_keys, crack_order,
+def pair_kernel(pair_i, pair_j, n_tri, old_keys, old_hist, keys, hist, touching, crack_keys, crack_order,
                 broken, crack_mu, any_broken, kt_tri, mass_tri, damping_ratio, mu_base, kt_pair, damp_pair):
     """Pair ``q``: its key ``i n_tri + j``, its history carried from the old list, its constants."""
     q = cuda.grid(1)
@@ -98,7 +98,7 @@ def pair_kernel(pair_i, pair_j, n_tri, old_keys, old_hist, keys, hist, touching,
         crack = -1
         if any_broken:  # one thread a pair: bisection, then the merge's step
             crack, _ = crack_between(key, crack_keys, crack_order, lower_bound(crack_keys, key))
-        pair_constants_one(q, pair_i, pair_j, crack, mu_tri, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
+        pair_constants_one(q, pair_i, pair_j, crack, broken, crack_mu, kt_tri, mass_tri, damping_ratio,
                            mu_base, kt_pair, damp_pair)
 
 

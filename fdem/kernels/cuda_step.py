@@ -36,7 +36,7 @@ from fdem.kernels.cracks import element_update
 from fdem.kernels.stepping import LEDGER_FIELDS, triangle_step
 
 __all__ = ["THREADS", "N_STEP_SUMS", "N_CONTACT_SUMS", "blocks_for", "step_kernel", "crack_kernel",
-           "contact_kernel", "gather_kernel", "moved_kernel", "divide_kernel", "zero_kernel"]
+           "contact_kernel", "gather_kernel", "moved_kernel", "zero_kernel"]
 
 THREADS = int(os.environ.get("FDEM_CUDA_THREADS", "128"))
 """Threads per block of every kernel: a power of two (the shared-memory reduction halves it),
@@ -128,8 +128,8 @@ def crack_kernel(x, f, nodes, const, status, state, diss, offset, dil, run, brok
 
 
 @cuda.jit
-def contact_kernel(x, v, pair_i, pair_j, starts, penalty, mu, kt_pair, damp, dt, spring, f_t, touching, witness,
-                   f, sums):
+def contact_kernel(x, v, pair_i, pair_j, starts, penalty, mu_base, face_mu, inv_f, kt_pair, damp, dt, spring, f_t,
+                   touching, witness, f, sums):
     """Contact pairs, one thread per contactor: thread ``g`` runs
     :func:`fdem.kernels.contact_pairs._pair_range` over pairs ``[starts[g], starts[g+1])``
     (all pairs of one contactor, ``pair_i`` sorted), so it alone writes that contactor's nodes
@@ -143,8 +143,8 @@ def contact_kernel(x, v, pair_i, pair_j, starts, penalty, mu, kt_pair, damp, dt,
         w = cuda.local.array(N_WORK, float64)
         iw = cuda.local.array(N_IWORK, int64)
         pool = cuda.local.array((MAX_VERT, N_COL), float64)
-        e_n, e_t, w_f, w_d = _pair_range(starts[g], starts[g + 1], x, v, pair_i, pair_j, penalty, mu, kt_pair, damp,
-                                         dt, spring, f_t, touching, witness, f, w, iw, pool)
+        e_n, e_t, w_f, w_d = _pair_range(starts[g], starts[g + 1], x, v, pair_i, pair_j, penalty, mu_base, face_mu,
+                                         inv_f, kt_pair, damp, dt, spring, f_t, touching, witness, f, w, iw, pool)
         shared[tid, 0] = e_n
         shared[tid, 1] = e_t
         shared[tid, 2] = w_f
@@ -167,14 +167,6 @@ def moved_kernel(x, x_ref, active, out):
     a = cuda.grid(1)
     if a < active.shape[0]:
         cuda.atomic.max(out, 0, triangle_moved2(x, x_ref, active[a]))
-
-
-@cuda.jit
-def divide_kernel(a, divisor, out):
-    """``out = a / divisor`` (1-D): the pairs' reduced friction, ``mu = mu_base / F``."""
-    i = cuda.grid(1)
-    if i < a.shape[0]:
-        out[i] = a[i] / divisor
 
 
 @cuda.jit

@@ -68,16 +68,22 @@ contact resists that. Two ways to hand them to contact (``softening=``):
 * ``"all"``: every triangle of every inelastic element becomes a contactor at once and is
   searched against every other contactor (boundary triangles included).
 
-Friction belongs to the interface
----------------------------------
-A pair of triangles across a broken crack element uses that element's residual friction
-(its joint set's ``phi_res``, from :class:`fdem.interfaces.Interfaces`); any other pair uses
-``min(mu_i, mu_j)``, where a triangle's ``mu`` is the lowest friction of the faces it exposes
-(its external faces: ``friction_angle``; its broken crack elements: their residual friction).
-Activating a broken element never raises the friction of a face broken earlier. All of these
-are base values: the pair friction is ``mu_base / F`` with the current strength-reduction
-factor ``F`` (the crack set's :class:`~fdem.interfaces.Interfaces`, or
-``ContactSet.interfaces.set_reduction`` without crack elements), whatever broke when.
+Friction belongs to the faces in touch
+--------------------------------------
+Every triangle face has a base friction (``face_friction``, (n_triangles, 3), face ``k`` from
+corner ``k`` to ``k + 1``): the faces a triangle is built with (external faces, and internal
+ones while their crack element holds) have ``friction_angle`` or what :meth:`ContactSet.set_friction`
+gave them (``face_mu``, a parameter of the model); the two faces of a
+broken crack element take that element's residual friction (its joint set's ``phi_res``, from
+:class:`fdem.interfaces.Interfaces`), never raising a face broken earlier. A pair of triangles
+across a broken crack element uses that element's residual friction; any other pair uses
+``min(mu_i, mu_j)`` of the two faces in touch, picked every step by the contact normal
+(:func:`fdem.kernels.contact_pairs.pair_friction`): a block with a smooth joint face (phi = 11
+deg) and a face broken through rock slides on the floor with the friction of the face it lies
+on, not with the lowest of its three. All of these are base values: the pair friction is
+``mu_base / F`` with the current strength-reduction factor ``F`` (the crack set's
+:class:`~fdem.interfaces.Interfaces`, or ``ContactSet.interfaces.set_reduction`` without crack
+elements), whatever broke when.
 """
 from __future__ import annotations
 
@@ -89,8 +95,14 @@ from fdem.kernels import contact_search as ks
 from fdem.mesh.topology import Topology
 from fdem.mesh.triangles import triangle_areas
 
-__all__ = ["pair_energy_force", "grid_cell_size", "candidate_pairs", "brute_force_candidate_pairs", "INELASTIC_CHECK_EVERY",
+__all__ = ["CONTACT_LAW", "pair_energy_force", "grid_cell_size", "candidate_pairs", "brute_force_candidate_pairs", "INELASTIC_CHECK_EVERY",
            "LOOSE_FRACTION", "SOFTENING_MODES", "ContactSet"]
+
+
+CONTACT_LAW = "penalty overlap, Coulomb friction of the faces in touch"
+"""What a checkpoint records of the contact law (:func:`fdem.solve.checkpoint.model_fingerprint`):
+runs are carried on under the law they began with. Before 2026-11-25 a pair's friction was the
+lowest of all six faces of its two triangles; checkpoints of then carry no law and are refused."""
 
 
 # ----------------------------------------------------------------------------- small helpers
@@ -281,10 +293,12 @@ class ContactSet:
         if not np.isfinite(tangential_ratio) or tangential_ratio <= 0.0:
             raise ValueError(f"tangential_ratio must be positive and finite, got {tangential_ratio!r}")
         self.tangential_ratio = tangential_ratio
-        self.mu_tri = _friction_to_mu(friction_angle, n_tri, "triangle")  # face friction, lowered as faces break
-        # the faces' friction as built or set (a parameter: checkpoints fingerprint it), while
-        # mu_tri is state that breakage lowers
-        self.face_mu = self.mu_tri.copy()
+        # each triangle's face friction as built or set (a parameter: checkpoints fingerprint it);
+        # face_friction, one value per face, is what breakage lowers (derived: face_mu and the
+        # broken elements' residual friction, _rebuild_face_friction)
+        self.face_mu = np.repeat(_friction_to_mu(friction_angle, n_tri, "triangle")[:, None], 3, axis=1)
+        self.face_friction = self.face_mu.copy()
+        self.face_version = 0  # counts changes of face_friction (a device copy follows it)
         # the one home of the strength-reduction factor F: the crack elements' when there are any
         self.interfaces = cracks.interfaces if cracks is not None else Interfaces({})
         # broken crack element between two triangles: sorted keys i * n_tri + j (i < j)
@@ -346,7 +360,6 @@ class ContactSet:
         self.pairs = np.zeros((0, 2), np.int64)
         self._keys = np.zeros(0, np.int64)
         self._history = np.zeros((0, kc.N_HIST))
-        self._mu_pair = np.zeros(0)
         self._mu_base_pair = np.zeros(0)
         self._damp_pair = np.zeros(0)
         self._pair_i = np.zeros(0, np.int64)       # contiguous copies of the pair columns
@@ -379,7 +392,6 @@ class ContactSet:
             if already.size:
                 self.activate_cracks(already)
             self._watch_inelastic()
-        self.interfaces.subscribe(self._refresh_pair_friction)
 
     # ------------------------------------------------------------------ state
     @property
@@ -451,9 +463,10 @@ class ContactSet:
         can push each other (they could not while the crack element was intact). The base
         (unreduced) friction of the broken faces is ``friction_angle`` [deg] or ``mu = tan(phi)``
         when given (a scalar or one value per crack), else the residual friction of the crack's
-        joint set from the crack set's interfaces, else the external-face friction of the two
-        triangles. Both triangles' face friction becomes the lower of what they had and this
-        (see the module docstring). Triggers a re-search on the next :meth:`add_forces`.
+        joint set from the crack set's interfaces, else the lower built friction of its two
+        faces. The two faces of the element (one on each triangle) take the lower of what
+        they had and this; the triangles' other faces keep theirs (see the module docstring).
+        Triggers a re-search on the next :meth:`add_forces`.
         """
         ids = np.atleast_1d(np.asarray(crack_ids, dtype=np.int64))
         if ids.size == 0:
@@ -466,13 +479,13 @@ class ContactSet:
             if self.cracks is not None:
                 coef = self.cracks.interfaces.tan_phi_res_base[self.cracks.tag[ids]]
             else:
-                coef = np.minimum(self.mu_tri[tri[:, 0]], self.mu_tri[tri[:, 1]])
+                cn = self.topology.crack_nodes[ids]
+                coef = np.minimum(self.face_mu[tri[:, 0], cn[:, 0] % 3], self.face_mu[tri[:, 1], cn[:, 2] % 3])
         self._crack_mu[ids] = coef
-        np.minimum.at(self.mu_tri, tri[:, 0], coef)
-        np.minimum.at(self.mu_tri, tri[:, 1], coef)
         self._broken[ids] = True
         self._any_broken = True
         cn = self.topology.crack_nodes[ids]
+        self._lower_broken_faces(tri, cn, coef)
         self._bond[tri[:, 0], cn[:, 0] % 3] = -1
         self._bond[tri[:, 1], cn[:, 2] % 3] = -1
         self._is_contactor[tri.ravel()] = True
@@ -544,19 +557,29 @@ class ContactSet:
             self._refresh_active()
             self._needs_search = True
 
-    def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None) -> None:
-        """Set the base face friction of ``triangles`` (default all), as ``friction_angle`` [deg]
-        or ``mu = tan(phi)``, scalar or one per triangle (new joint or surface properties; a
-        strength reduction goes through ``interfaces.set_reduction`` instead). Pairs across a broken
-        crack element keep that element's friction. The pairs use it from the next step, their
-        slip history is kept."""
+    def set_friction(self, friction_angle=None, mu=None, triangles: np.ndarray | None = None,
+                     faces: np.ndarray | None = None) -> None:
+        """Set the base friction of the faces of ``triangles`` (default all), as
+        ``friction_angle`` [deg] or ``mu = tan(phi)``, scalar or one per triangle (new joint or
+        surface properties; a strength reduction goes through ``interfaces.set_reduction``
+        instead): all three faces of each, or with ``faces`` only face ``faces[k]`` (0, 1, 2:
+        the face from corner ``f`` to corner ``f + 1``) of ``triangles[k]``, e.g. the top of a
+        floor. Faces of broken crack elements keep that element's friction. The pairs use it
+        from the next step, their slip history is kept."""
         tris = np.arange(self.topology.n_triangles) if triangles is None else np.asarray(triangles, np.int64)
+        if tris.ndim != 1 or (tris.size and (tris.min() < 0 or tris.max() >= self.topology.n_triangles)):
+            raise ValueError(f"triangles must be ids in [0, {self.topology.n_triangles}), got {tris}")
         coef = _mu_from(friction_angle, mu, tris.size, "triangle")
         if coef is None:
             raise ValueError("set_friction needs friction_angle or mu")
-        self.mu_tri[tris] = coef
-        self.face_mu[tris] = coef
-        self._refresh_pair_friction()
+        if faces is None:
+            self.face_mu[tris] = coef[:, None]
+        else:
+            k = np.asarray(faces, np.int64)
+            if k.shape != tris.shape or (k.size and (k.min() < 0 or k.max() > 2)):
+                raise ValueError(f"faces must give one face (0, 1 or 2) per triangle ({tris.size}), got {faces}")
+            self.face_mu[tris, k] = coef
+        self._rebuild_face_friction()
 
     @property
     def reduction(self) -> float:
@@ -570,16 +593,28 @@ class ContactSet:
         pi = np.ascontiguousarray(pairs[:, 0], dtype=np.int64)
         pj = np.ascontiguousarray(pairs[:, 1], dtype=np.int64)
         mass = self.mass_tri if self.mass_tri is not None else np.zeros(0)
-        return kc.pair_constants(pi, pj, self.topology.n_triangles, self.mu_tri, self._crack_keys, self._crack_order,
+        return kc.pair_constants(pi, pj, self.topology.n_triangles, self._crack_keys, self._crack_order,
                                  self._broken, self._crack_mu, self._any_broken, self._kt_tri, mass,
                                  self.damping_ratio)
 
-    def _refresh_pair_friction(self) -> None:
-        if len(self.pairs):
-            self._mu_base_pair = self._pair_constants(self.pairs)[0]
-        else:
-            self._mu_base_pair = np.zeros(0)
-        self._mu_pair = self._mu_base_pair / self.reduction
+    def _lower_broken_faces(self, tri: np.ndarray, cn: np.ndarray, coef: np.ndarray) -> None:
+        """Faces of broken elements (triangles ``tri`` (k, 2), their crack nodes ``cn`` (k, 4))
+        take the lower of their friction and ``coef`` (k,): ``A``'s face starts at node
+        ``cn[:, 0]``, ``B``'s at ``cn[:, 2]``."""
+        flat = self.face_friction.reshape(-1)
+        np.minimum.at(flat, 3 * tri[:, 0] + cn[:, 0] % 3, coef)
+        np.minimum.at(flat, 3 * tri[:, 1] + cn[:, 2] % 3, coef)
+        self.face_version += 1
+
+    def _rebuild_face_friction(self) -> None:
+        """``face_friction`` from its sources: ``face_mu`` on every face, lowered on the faces of
+        the broken elements to their residual friction."""
+        self.face_friction[:] = self.face_mu
+        ids = np.flatnonzero(self._broken)
+        if ids.size:
+            self._lower_broken_faces(self.topology.crack_triangles[ids], self.topology.crack_nodes[ids],
+                                     self._crack_mu[ids])
+        self.face_version += 1
 
     # ------------------------------------------------------------------ search
     def search(self, x: np.ndarray) -> None:
@@ -599,7 +634,6 @@ class ContactSet:
         kc.carry_history(self._keys, self._history, keys, history, touching)
         self.pairs, self._keys, self._history = pairs, keys, history
         self._mu_base_pair, self._kt_pair, self._damp_pair = self._pair_constants(pairs)
-        self._mu_pair = self._mu_base_pair / self.reduction
         self._pair_i = np.ascontiguousarray(pairs[:, 0])
         self._pair_j = np.ascontiguousarray(pairs[:, 1])
         self._bounds = kc.chunk_bounds(self._pair_i, min(1024, max(1, len(pairs) // 128)))
@@ -660,7 +694,8 @@ class ContactSet:
             self.book_pair_sums(0.0, 0.0, 0.0, 0.0)
             return
         self.book_pair_sums(*kc.pair_forces(x, v, self._pair_i, self._pair_j, self._bounds, self.penalty,
-                                            self._mu_pair, self._kt_pair, self._damp_pair, float(dt),
+                                            self._mu_base_pair, self.face_friction, 1.0 / self.reduction,
+                                            self._kt_pair, self._damp_pair, float(dt),
                                             self._history, self._f_target, self._touching, self._witness, f))
         kc.gather_forces(f, self._active, self._inc_ptr, self._inc_pair, self._f_target, self._touching)
 
@@ -767,7 +802,7 @@ class ContactSet:
                 f"move the bodies apart or mesh them as one ({bad.size} overlapping pair(s) in all)")
 
     # ------------------------------------------------------------------ checkpoint
-    _PAIR_STATE = ("pairs", "_keys", "_history", "_mu_pair", "_mu_base_pair", "_kt_pair", "_damp_pair", "_pair_i",
+    _PAIR_STATE = ("pairs", "_keys", "_history", "_mu_base_pair", "_kt_pair", "_damp_pair", "_pair_i",
                    "_pair_j", "_bounds", "_f_target", "_touching", "_inc_ptr", "_inc_pair")
 
     def state_dict(self) -> dict:
@@ -780,7 +815,7 @@ class ContactSet:
             "kind": type(self).__name__, "n_triangles": int(self.topology.n_triangles),
             "broken": self._broken.copy(), "any_broken": bool(self._any_broken), "bond": self._bond.copy(),
             "is_contactor": self._is_contactor.copy(), "any_extra_contactor": bool(self._any_extra_contactor),
-            "n_inelastic_seen": int(self._n_inelastic_seen), "mu_tri": self.mu_tri.copy(),
+            "n_inelastic_seen": int(self._n_inelastic_seen),
             "crack_mu": self._crack_mu.copy(), "reduction": float(self.interfaces.reduction),
             "x_search": None if self._x_search is None else self._x_search.copy(),
             "needs_search": bool(self._needs_search), "n_searches": int(self.n_searches),
@@ -804,8 +839,8 @@ class ContactSet:
         self._is_contactor[:] = d["is_contactor"]
         self._any_extra_contactor = bool(d["any_extra_contactor"])
         self._n_inelastic_seen = int(d["n_inelastic_seen"])
-        self.mu_tri[:] = d["mu_tri"]
         self._crack_mu[:] = d["crack_mu"]
+        self._rebuild_face_friction()  # from face_mu (built here) and the broken elements restored
         if self.cracks is None:  # else the crack set restores the factor they share
             self.interfaces.restore_reduction(float(d["reduction"]))
         for name in self._PAIR_STATE:

@@ -19,8 +19,8 @@ strength. Fracture energies and penalties are kept. ``F = 1`` is the material as
 factor of safety is the ``F`` at which the slope fails (:mod:`fdem.workflow.stages`).
 
 Friction belongs to the interface, not to the triangle: a contact pair across a broken crack
-element uses that element's residual friction; any other pair uses the lowest friction of the
-faces its two triangles expose (see :class:`fdem.physics.contact.ContactSet`).
+element uses that element's residual friction; any other pair uses the lower friction of the
+two faces in touch (see :class:`fdem.physics.contact.ContactSet`).
 """
 from __future__ import annotations
 

@@ -43,6 +43,8 @@ from pathlib import Path
 from typing import Callable
 import numpy as np
 
+from fdem.physics.contact import CONTACT_LAW
+
 __all__ = ["FORMAT_VERSION", "mesh_fingerprint", "model_fingerprint", "snapshot", "restore", "save_checkpoint", "read_checkpoint",
            "load_checkpoint", "periodic", "chain", "checkpointed_run", "continue_run"]
 
@@ -92,7 +94,8 @@ def model_fingerprint(sim) -> dict:
     model's own, [m/s^2]: stages scale it, the checkpoint's current gravity is restored),
     ``providers`` (their kinds in order), ``crack_properties`` (the property set of every tag,
     heterogeneity draws, scheme), ``contact`` (penalty, friction, damping and softening of
-    the contact set)."""
+    the contact set) and ``contact_law`` (:data:`CONTACT_LAW`: a run is not carried on under
+    another contact law than it began with)."""
     model = sim.model
     fp = {"materials": _digest(model.triangle_constants()),
           "supports": _digest(model.flags, model.v_prescribed),
@@ -107,6 +110,7 @@ def model_fingerprint(sim) -> dict:
     contact = getattr(sim, "contact", None)
     if contact is not None:
         fp["contact"] = _contact_digest(contact, getattr(contact, "face_mu", np.zeros(0)))
+        fp["contact_law"] = CONTACT_LAW
     return fp
 
 
@@ -117,33 +121,14 @@ def _contact_digest(contact, face_mu) -> str:
         "penalty", "tangential_ratio", "damping_ratio", "softening", "loose_fraction")) + (_digest(face_mu),))
 
 
-def _written_with_current_friction(meta: dict, sim) -> bool:
-    """Whether a checkpoint's contact digest is that of this contact set with the face
-    friction saved in its own state: files written before the digest took the friction as
-    built took it as lowered by breakage at the time of writing, and would otherwise be
-    refused for every run that had broken an element (format 1 files of before 2026-11-24)."""
-    contact = getattr(sim, "contact", None)
-    try:
-        index = sim.providers.index(contact)
-        saved = meta["state"]["providers"][index]
-        saved_mu, broken = np.asarray(saved["mu_tri"]), np.asarray(saved["broken"], dtype=bool)
-    except (ValueError, KeyError, IndexError, TypeError):
-        return False
-    if saved_mu.shape != contact.face_mu.shape or broken.shape != (contact.topology.n_cracks,):
-        return False
-    # and the faces are the ones built here: breakage only lowers the friction of faces beside
-    # a broken element, every other face kept the friction it was built with
-    beside_broken = np.zeros(saved_mu.size, dtype=bool)
-    beside_broken[contact.topology.crack_triangles[broken].ravel()] = True
-    kept = (saved_mu == contact.face_mu) | (beside_broken & (saved_mu < contact.face_mu))
-    return bool(kept.all()) and meta["model"].get("contact") == _contact_digest(contact, saved_mu)
-
-
 _PART_NAMES = {"materials": "materials (elastic moduli, density or element damping)",
                "supports": "supports (fixed or roller boundaries, prescribed velocities)",
                "gravity": "gravity", "providers": "force providers",
                "crack_properties": "crack-element property sets (strengths, penalties, heterogeneity)",
-               "contact": "contact parameters (penalty, friction, damping)"}
+               "contact": "contact parameters (penalty, friction, damping)",
+               "contact_law": "contact law (a checkpoint without one was written with the friction of a pair taken "
+                              "as the lowest of all six faces of its two triangles; carry such a run on with the "
+                              "fdem that began it, git checkout c9b5bed, or start it again)"}
 
 
 def _model_differences(saved: dict, here: dict) -> list[str]:
@@ -298,9 +283,6 @@ def load_checkpoint(sim, path) -> dict | None:
     if meta.get("model") is not None:
         here_model = model_fingerprint(sim)
         differences = _model_differences(meta["model"], here_model)
-        if differences and meta["model"].get("contact") != here_model.get("contact") \
-                and _written_with_current_friction(meta, sim):
-            differences = _model_differences({**meta["model"], "contact": here_model.get("contact")}, here_model)
         if differences:
             raise ValueError(f"checkpoint {path} belongs to another model on the same mesh; it differs in "
                              + "; ".join(differences))

@@ -179,6 +179,8 @@ class CudaBackend:
             self.s_crack_order = self._to(co._crack_order if co._crack_order.size else np.zeros(1, np.int64))
             self.s_kt_tri = self._to(co._kt_tri)
             self.s_mass_tri = self._to(co.mass_tri if co.mass_tri is not None else np.zeros(1))
+            self.s_face_mu = self._to(co.face_friction)  # sent again when it changes (face_version)
+            self._face_version = co.face_version
             # the grid's cell: the contact set's, else taken from the boxes of the first device search
             self._cell_size = co.cell_size or getattr(self, "_cell_size", None)
             co.device = self
@@ -290,7 +292,6 @@ class CudaBackend:
         self.p_i = self._to(pair_i)
         self.p_j = self._to(co._pair_j if n_pairs else np.zeros(1, np.int64))
         one = np.zeros(1)
-        self.p_mu = self._to(co._mu_pair if n_pairs else one)
         self.p_mu_base = self._to(co._mu_base_pair if n_pairs else one)
         self.p_kt = self._to(co._kt_pair if n_pairs else one)
         self.p_damp = self._to(co._damp_pair if n_pairs else one)
@@ -333,7 +334,6 @@ class CudaBackend:
         co._witness = host(self.p_witness)
         co._f_target = host(self.p_ft)
         co._mu_base_pair = host(self.p_mu_base)
-        co._mu_pair = host(self.p_mu)
         co._kt_pair = host(self.p_kt)
         co._damp_pair = host(self.p_damp)
         co._inc_ptr = self.p_inc_ptr.copy_to_host()
@@ -356,7 +356,6 @@ class CudaBackend:
         active = self._to(co._active if n_act else np.zeros(1, np.int64))
         bond = self._to(co._bond)
         slot = self._to(co._slot)
-        mu_tri = self._to(co.mu_tri)
         broken = self._to(co._broken.view(np.uint8))
         crack_mu = self._to(co._crack_mu if co._crack_mu.size else np.zeros(1))
         n_pairs = 0
@@ -397,7 +396,7 @@ class CudaBackend:
             kt = cuda.device_array(n_pairs, np.float64)
             damp = cuda.device_array(n_pairs, np.float64)
             old_hist = self.p_hist if self._n_pairs else self._to(np.zeros((1, co._history.shape[1])))
-            ks.pair_kernel[blocks(n_pairs), T](pi, pj, n_tri, self.p_keys, old_hist, keys, hist, touching, mu_tri,
+            ks.pair_kernel[blocks(n_pairs), T](pi, pj, n_tri, self.p_keys, old_hist, keys, hist, touching,
                                                self.s_crack_keys, self.s_crack_order, broken, crack_mu,
                                                bool(co._any_broken), self.s_kt_tri, self.s_mass_tri,
                                                float(co.damping_ratio), mu_base, kt, damp)
@@ -410,8 +409,6 @@ class CudaBackend:
             self.round_trips += 1
             self.p_i, self.p_j, self.p_keys, self.p_hist, self.p_touch = pi, pj, keys, hist, touching
             self.p_mu_base, self.p_kt, self.p_damp = mu_base, kt, damp
-            self.p_mu = cuda.device_array(n_pairs, np.float64)
-            self.k.divide_kernel[blocks(n_pairs), T](mu_base, float(co.reduction), self.p_mu)
             self.p_ft = self._to(np.zeros((n_pairs, 6)))
             self.p_witness = self._to(np.zeros(n_pairs, np.uint8))
             self.p_inc_ptr, self.p_inc_pair = inc_ptr, inc
@@ -467,9 +464,13 @@ class CudaBackend:
     def _launch_contact(self, co, dt: float, row) -> None:
         k = self.k
         if self._n_contactors:
+            if self._face_version != co.face_version:  # faces broke or were given a friction since
+                self.s_face_mu = self._to(co.face_friction)
+                self._face_version = co.face_version
             k.contact_kernel[k.blocks_for(self._n_contactors), k.THREADS](
-                self.x, self.v, self.p_i, self.p_j, self.p_starts, co.penalty, self.p_mu, self.p_kt, self.p_damp,
-                dt, self.p_hist, self.p_ft, self.p_touch, self.p_witness, self.f, row[_CONTACT])
+                self.x, self.v, self.p_i, self.p_j, self.p_starts, co.penalty, self.p_mu_base, self.s_face_mu,
+                1.0 / float(co.reduction), self.p_kt, self.p_damp, dt, self.p_hist, self.p_ft, self.p_touch,
+                self.p_witness, self.f, row[_CONTACT])
             k.gather_kernel[k.blocks_for(self._n_active), k.THREADS](
                 self.f, self.p_active, self.p_inc_ptr, self.p_inc_pair, self.p_ft, self.p_touch)
 

@@ -16,7 +16,7 @@ import pytest
 from fdem.solve import checkpoint as ck
 from fdem.physics.crack_properties import CrackProperties
 from fdem.physics.cracks import CrackSet
-from fdem.physics.contact import ContactSet
+from fdem.physics.contact import CONTACT_LAW, ContactSet
 from fdem.physics.elastic import ElasticMaterial
 from fdem.mesh.mesh import structured_rectangle
 from fdem.solve.model import Model
@@ -272,27 +272,27 @@ def test_a_run_whose_breakage_lowered_face_friction_resumes(tmp_path):
     run(ref[0], HALF)
     first = scene(rock_phi=20.0)
     run(first[0], HALF)
-    lowered = int((first[2].mu_tri < first[2].face_mu).sum())
+    lowered = int((first[2].face_friction < first[2].face_mu).sum())
     assert lowered > 5
     path = ck.save_checkpoint(first[0], tmp_path / "run.ckpt")
     again = scene(rock_phi=20.0)
     ck.load_checkpoint(again[0], path)
-    assert int((again[2].mu_tri < again[2].face_mu).sum()) == lowered
+    assert np.array_equal(again[2].face_friction, first[2].face_friction)
+    assert int((again[2].face_friction < again[2].face_mu).sum()) == lowered
     continues_and_refuses_other_friction(ref, again, path)
 
 
-def test_a_checkpoint_fingerprinted_with_lowered_friction_still_resumes(tmp_path):
-    """Files written before the fingerprint took the face friction as built took it as
-    lowered by breakage; they are checked against the friction saved in their own state."""
-    ref = scene(rock_phi=20.0)
-    run(ref[0], HALF)
-    run(ref[0], HALF)
+def test_a_checkpoint_of_the_earlier_contact_law_is_refused(tmp_path, monkeypatch):
+    """Checkpoints written before a pair's friction came from the faces in touch (before
+    2026-11-25) carry no contact law: carrying such a run on would mix two laws in one run, so
+    it is refused, with a message that says why and what to do."""
     first = scene(rock_phi=20.0)
     run(first[0], HALF)
-    as_built = first[2].face_mu
-    first[2].face_mu = first[2].mu_tri.copy()  # the old rule: digest of the current friction
     path = ck.save_checkpoint(first[0], tmp_path / "old.ckpt")
-    first[2].face_mu = as_built
+    meta = ck.read_checkpoint(path)
+    assert meta["model"]["contact_law"] == CONTACT_LAW
+    del meta["model"]["contact_law"]  # as the earlier code wrote them
     again = scene(rock_phi=20.0)
-    ck.load_checkpoint(again[0], path)
-    continues_and_refuses_other_friction(ref, again, path)
+    monkeypatch.setattr(ck, "read_checkpoint", lambda _path: meta)
+    with pytest.raises(ValueError, match="contact law .*lowest of all six faces.*git checkout"):
+        ck.load_checkpoint(again[0], path)

@@ -269,18 +269,21 @@ def test_broken_joint_friction_belongs_to_the_interface_and_is_reduced():
     pair_index = lambda: {tuple(p): k for k, p in enumerate(cs.pairs.tolist())}
     q = pair_index()[(min(a, b), max(a, b))]
     t25, t35, t40 = (np.tan(np.radians(d)) for d in (25.0, 35.0, 40.0))
-    assert cs._mu_pair[q] == pytest.approx(t25)
-    cs.interfaces.set_reduction(1.5)
-    assert cs._mu_pair[q] == pytest.approx(t25 / 1.5)
-    # a later breakage with higher friction neither overwrites nor escapes the reduction
+    assert cs._mu_base_pair[q] == pytest.approx(t25)  # the broken element's own, whatever faces touch
+    # a later breakage with higher friction does not overwrite it
     cs.activate_cracks([0], friction_angle=[35.0])
     cs.search(topo.x0)
     idx = pair_index()
-    assert cs._mu_pair[idx[(min(a, b), max(a, b))]] == pytest.approx(t25 / 1.5)
+    assert cs._mu_base_pair[idx[(min(a, b), max(a, b))]] == pytest.approx(t25)
     c, d = topo.crack_triangles[0]
-    assert cs._mu_pair[idx[(min(c, d), max(c, d))]] == pytest.approx(t35 / 1.5)
-    # a triangle exposes its lowest-friction face to pairs not across a broken element
-    assert cs.mu_tri[a] == pytest.approx(min(t25, t40)) and cs.mu_tri[b] <= t25 + 1e-15
+    assert cs._mu_base_pair[idx[(min(c, d), max(c, d))]] == pytest.approx(t35)
+    # other pairs take it from the faces in touch: only the broken elements' faces were lowered
+    assert (cs._mu_base_pair[[k for p, k in idx.items() if p not in ((min(a, b), max(a, b)), (min(c, d), max(c, d)))]]
+            == fcontact_kernels.FROM_FACES).all()
+    cn = topo.crack_nodes[1]
+    assert cs.face_friction[a, cn[0] % 3] == pytest.approx(t25) and cs.face_friction[b, cn[2] % 3] == pytest.approx(t25)
+    lowered = np.argwhere(cs.face_friction < t40 - 1e-12)
+    assert len(lowered) == 4 and cs.face_mu == pytest.approx(t40)  # two faces each of the two broken elements
     with pytest.raises(ValueError, match="mu"):
         cs.activate_cracks([0], mu=-0.1)
     with pytest.raises(ValueError, match="positive"):

@@ -142,7 +142,9 @@ def test_pair_loop_with_a_carried_witness_equals_a_fresh_one():
     pi, pj = (np.ascontiguousarray(a, dtype=np.int64) for a in np.nonzero(np.triu(near, 1)))
     n = len(pi)
     bounds = kc.chunk_bounds(pi, 8)
-    mu, kt, damp = np.full(n, 0.5), np.full(n, 1e9), np.full(n, 0.1)
+    mu, kt, damp = np.full(n, kc.FROM_FACES), np.full(n, 1e9), np.full(n, 0.1)
+    face_mu = np.full((len(x) // 3, 3), 0.5)
+    face_mu[::2, 1] = 0.2  # faces of two frictions: the face picking runs
     state = {name: (np.zeros((n, kc.N_HIST)), np.zeros((n, 6)), np.zeros(n, np.uint8)) for name in ("carry", "fresh")}
     witness = np.zeros(n, np.uint8)
     for step in range(60):
@@ -151,7 +153,7 @@ def test_pair_loop_with_a_carried_witness_equals_a_fresh_one():
         for name, (hist, f_t, touching) in state.items():
             f = np.zeros_like(x)
             w = witness if name == "carry" else np.zeros(n, np.uint8)
-            e = kc.pair_forces(xs, v, pi, pj, bounds, 1e10, mu, kt, damp, 1e-4, hist, f_t, touching, w, f)
+            e = kc.pair_forces(xs, v, pi, pj, bounds, 1e10, mu, face_mu, 1.0, kt, damp, 1e-4, hist, f_t, touching, w, f)
             out[name] = (e, f)
         assert out["carry"][0] == out["fresh"][0]
         assert np.array_equal(out["carry"][1], out["fresh"][1])

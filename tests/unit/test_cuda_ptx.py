@@ -27,11 +27,10 @@ SIGNATURES = {
     "step_kernel": (A2, A2, A2, A2, A2, boolean, A2, boolean, uint8[:], A2, float64, float64, float64, float64,
                     float64, boolean, boolean, float64[:]),
     "crack_kernel": (A2, A2, int32[:, :], A2, int8[:], A2, A2, A2, A2, int64[:], int8[:], float64[:]),
-    "contact_kernel": (A2, A2, int64[:], int64[:], int64[:], float64, float64[:], float64[:], float64[:], float64,
-                       A2, A2, uint8[:], uint8[:], A2, float64[:]),
+    "contact_kernel": (A2, A2, int64[:], int64[:], int64[:], float64, float64[:], A2, float64, float64[:], float64[:],
+                       float64, A2, A2, uint8[:], uint8[:], A2, float64[:]),
     "gather_kernel": (A2, int64[:], int64[:], int64[:], A2, uint8[:]),
     "moved_kernel": (A2, A2, int64[:], float64[:]),
-    "divide_kernel": (float64[:], float64, float64[:]),
     "zero_kernel": (A2,),
 }
 I2 = int64[:, :]
@@ -43,7 +42,7 @@ SEARCH_SIGNATURES = {
                              int64[:], int64[:]),
     "partner_fill_kernel": (A2, int64[:], I2, A2, float64, float64, float64, float64, int64, int64[:], int64[:],
                             int64[:], int64[:], int64[:]),
-    "pair_kernel": (int64[:], int64[:], int64, int64[:], A2, int64[:], A2, uint8[:], float64[:], int64[:], int64[:],
+    "pair_kernel": (int64[:], int64[:], int64, int64[:], A2, int64[:], A2, uint8[:], int64[:], int64[:],
                     uint8[:], float64[:], boolean, float64[:], float64[:], float64, float64[:], float64[:],
                     float64[:]),
     "incidence_count_kernel": (int64[:], int64[:], int64[:]),
