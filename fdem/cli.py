@@ -55,14 +55,19 @@ def _ending(name: str, main, argv: list[str]) -> int:
     (:func:`fdem.cases.common.exit_code`): a finished run by its summary's outcome; an
     interruption outside the time loop 130 / 143; a file that could not be written (a full
     disk, a folder made read-only) or an unstable run that the case did not catch, one line
-    and 1, never a chain of tracebacks. Anything else is a defect and keeps its traceback."""
+    and 1; a ``--resume`` checkpoint of another mesh, model or contact law, one line and 2;
+    never a chain of tracebacks. Anything else is a defect and keeps its traceback."""
     import signal
 
     from fdem.cases.common import exit_code
+    from fdem.solve.checkpoint import CheckpointMismatch
     from fdem.solve.simulation import STOP, InstabilityError
 
     try:
         return exit_code(main(argv))
+    except CheckpointMismatch as err:  # --resume of another scene, model or contact law: nothing was run
+        print(f"fdem run {name}: cannot resume: {err}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as stop:
         sig = STOP.received or "SIGINT"
         print(f"fdem run {name}: interrupted ({stop.args[0] if stop.args else sig}) before the run could "

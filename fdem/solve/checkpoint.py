@@ -45,7 +45,7 @@ import numpy as np
 
 from fdem.physics.contact import CONTACT_LAW
 
-__all__ = ["FORMAT_VERSION", "mesh_fingerprint", "model_fingerprint", "snapshot", "restore", "save_checkpoint", "read_checkpoint",
+__all__ = ["CheckpointMismatch", "FORMAT_VERSION", "mesh_fingerprint", "model_fingerprint", "snapshot", "restore", "save_checkpoint", "read_checkpoint",
            "load_checkpoint", "periodic", "chain", "checkpointed_run", "continue_run"]
 
 
@@ -267,24 +267,33 @@ def read_checkpoint(path) -> dict:
     return meta
 
 
+class CheckpointMismatch(ValueError):
+    """A checkpoint that belongs to another mesh or model than the simulation it is loaded into:
+    a user's condition (the message says what differs), not a defect."""
+
+
 def load_checkpoint(sim, path) -> dict | None:
     """Restore the state saved by :func:`save_checkpoint` into ``sim``, a freshly built
     simulation of the same scene; returns the saved ``context`` (``None`` if none). A checkpoint
-    of another mesh is refused with a ``ValueError`` naming both meshes' counts, one of another
-    model with one naming every part that differs (:func:`model_fingerprint`; files written
+    of another mesh is refused with a :class:`CheckpointMismatch` naming both meshes' counts, one of
+    another model with one naming every part that differs (:func:`model_fingerprint`; files written
     before the model was fingerprinted are checked on their mesh only); a missing file raises
     ``FileNotFoundError``, a corrupt one ``ValueError``."""
     meta = read_checkpoint(path)
     here = mesh_fingerprint(sim)
     saved = meta.get("mesh", {})
     if saved != here:
-        raise ValueError(f"checkpoint {path} belongs to another mesh: saved with {_describe(saved)}, "
+        raise CheckpointMismatch(f"checkpoint {path} belongs to another mesh: saved with {_describe(saved)}, "
                          f"this simulation has {_describe(here)}")
     if meta.get("model") is not None:
         here_model = model_fingerprint(sim)
-        differences = _model_differences(meta["model"], here_model)
+        saved_model = meta["model"]
+        if saved_model.get("contact_law") != here_model.get("contact_law"):
+            # the contact digest's form goes with the law: only the law is worth naming then
+            saved_model = {**saved_model, "contact": here_model.get("contact")}
+        differences = _model_differences(saved_model, here_model)
         if differences:
-            raise ValueError(f"checkpoint {path} belongs to another model on the same mesh; it differs in "
+            raise CheckpointMismatch(f"checkpoint {path} belongs to another model on the same mesh; it differs in "
                              + "; ".join(differences))
     sim.load_state_dict(meta["state"])
     return meta.get("context")

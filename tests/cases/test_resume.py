@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -19,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fdem.solve import checkpoint as ck
 from fdem.solve.checkpoint import read_checkpoint
 
 SCENE = ["--size", "2.0", "--no-pictures", "--quiet", "--threads", "1"]
@@ -69,6 +71,23 @@ def assert_same_run(a: Path, b: Path) -> None:
     assert ja["runout"]["runout_distance_m"] == jb["runout"]["runout_distance_m"]
 
 
+def earlier_law_refused(run: Path, copy: Path) -> None:
+    """A copy of the stopped ``run`` whose checkpoint names no contact law, as those written before
+    the friction of the faces in touch, is refused in one line with exit code 2, before any work."""
+    shutil.copytree(run, copy)
+    path = copy / "checkpoint.npz"
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(arrays[ck._META].tobytes().decode("utf-8"))
+    del meta["model"]["contact_law"]
+    arrays[ck._META] = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    np.savez_compressed(path, **arrays)
+    refused = fdem("run", "quick-start", "--resume", str(copy))
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert "cannot resume" in refused.stderr and "contact law" in refused.stderr
+    assert "Traceback" not in refused.stderr and "contact parameters" not in refused.stderr
+
+
 def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
     out = tmp_path / "run"
     proc = start(out)
@@ -81,6 +100,7 @@ def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "interrupted" and "SIGTERM" in summary["ending"]
     assert (out / "checkpoint.npz").is_file() and (out / "interrupted_state.npz").is_file()
+    earlier_law_refused(out, tmp_path / "earlier_law")
     resumed = fdem("run", "quick-start", "--resume", str(out))
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     # the run's own options come back, --quiet with them: the resume is read off run.json
