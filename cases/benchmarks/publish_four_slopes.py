@@ -75,7 +75,9 @@ def figures(summary: dict) -> list[tuple[str, str]]:
                                           f"{run.get('runout_front_max_m', 0):.3g} m"
                                           + (f"; {off:.3g} m^2 left the model: a lower bound" if off > 0 else "")))
     rows.append(("volume", f"{run.get('displaced_area_m2', 0):.3g} m^2 displaced more than 0.1 m (per metre)"))
-    rows.append(("kinetic energy", f"peak {ke.get('peak_J_per_m', 0) / 1e6:.3g} MJ/m, {ke.get('final_J_per_m', 0) / 1e3:.3g} kJ/m at the end; "
+    final = ke.get("final_J_per_m", 0)
+    final_text = f"{final / 1e6:.3g} MJ/m" if final >= 1e5 else f"{final / 1e3:.3g} kJ/m"
+    rows.append(("kinetic energy", f"peak {ke.get('peak_J_per_m', 0) / 1e6:.3g} MJ/m, {final_text} at the end; "
                                    f"gravity released {ke.get('released_gravity_J_per_m', 0) / 1e6:.3g} MJ/m, "
                                    f"fracture {ke.get('fracture_J_per_m', 0) / 1e6:.3g} MJ/m"))
     rows.append(("breakage", f"{(summary.get('cracks') or {}).get('broken', 0):,} broken: intact rock {rock.get('broken', 0):,} "
