@@ -474,17 +474,16 @@ class ContactSet:
         if ids.min() < 0 or ids.max() >= self.topology.n_cracks:
             raise ValueError(f"crack ids must lie in [0, {self.topology.n_cracks}), got {ids.min()}..{ids.max()}")
         tri = self.topology.crack_triangles[ids]
+        cn = self.topology.crack_nodes[ids]
         coef = _mu_from(friction_angle, mu, ids.size, "crack")
         if coef is None:
             if self.cracks is not None:
                 coef = self.cracks.interfaces.tan_phi_res_base[self.cracks.tag[ids]]
             else:
-                cn = self.topology.crack_nodes[ids]
                 coef = np.minimum(self.face_mu[tri[:, 0], cn[:, 0] % 3], self.face_mu[tri[:, 1], cn[:, 2] % 3])
         self._crack_mu[ids] = coef
         self._broken[ids] = True
         self._any_broken = True
-        cn = self.topology.crack_nodes[ids]
         self._lower_broken_faces(tri, cn, coef)
         self._bond[tri[:, 0], cn[:, 0] % 3] = -1
         self._bond[tri[:, 1], cn[:, 2] % 3] = -1
@@ -564,8 +563,8 @@ class ContactSet:
         surface properties; a strength reduction goes through ``interfaces.set_reduction``
         instead): all three faces of each, or with ``faces`` only face ``faces[k]`` (0, 1, 2:
         the face from corner ``f`` to corner ``f + 1``) of ``triangles[k]``, e.g. the top of a
-        floor. Faces of broken crack elements keep that element's friction. The pairs use it
-        from the next step, their slip history is kept."""
+        floor. A face of a broken crack element has the lower of this and its element's residual
+        friction. The pairs use it from the next step, their slip history is kept."""
         tris = np.arange(self.topology.n_triangles) if triangles is None else np.asarray(triangles, np.int64)
         if tris.ndim != 1 or (tris.size and (tris.min() < 0 or tris.max() >= self.topology.n_triangles)):
             raise ValueError(f"triangles must be ids in [0, {self.topology.n_triangles}), got {tris}")

@@ -284,6 +284,15 @@ def test_broken_joint_friction_belongs_to_the_interface_and_is_reduced():
     assert cs.face_friction[a, cn[0] % 3] == pytest.approx(t25) and cs.face_friction[b, cn[2] % 3] == pytest.approx(t25)
     lowered = np.argwhere(cs.face_friction < t40 - 1e-12)
     assert len(lowered) == 4 and cs.face_mu == pytest.approx(t40)  # two faces each of the two broken elements
+    # one face set: the others keep theirs; a broken face has the lower of its element's and this
+    cs.set_friction(friction_angle=[30.0, 10.0], triangles=[a, a], faces=[cn[0] % 3, (cn[0] + 1) % 3])
+    assert cs.face_friction[a, cn[0] % 3] == pytest.approx(t25)
+    assert cs.face_friction[a, (cn[0] + 1) % 3] == pytest.approx(np.tan(np.radians(10.0)))
+    assert cs.face_friction[a, (cn[0] + 2) % 3] == pytest.approx(t40)
+    with pytest.raises(ValueError, match="faces must give one face"):
+        cs.set_friction(friction_angle=10.0, triangles=[a], faces=[3])
+    with pytest.raises(ValueError, match="triangles must be ids"):
+        cs.set_friction(friction_angle=10.0, triangles=[topo.n_triangles])
     with pytest.raises(ValueError, match="mu"):
         cs.activate_cracks([0], mu=-0.1)
     with pytest.raises(ValueError, match="positive"):
