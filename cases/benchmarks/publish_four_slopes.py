@@ -19,6 +19,11 @@ import shutil
 import sys
 from pathlib import Path
 
+import meshio
+import numpy as np
+
+from fdem.results.analysis import boundary_motion
+
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs" / "cases" / "rest"
 PICTURES = ("mechanism", "kinetic_energy")
@@ -41,8 +46,23 @@ def _mode(d: dict) -> str:
     return f"I {m.get('I', 0)} / II {m.get('II', 0)} / mixed {m.get('mixed', 0)}"
 
 
-def figures(summary: dict) -> list[tuple[str, str]]:
-    """(row, this run) pairs of the beside-the-paper table, read from ``summary``."""
+def last_frame_boundaries(run: Path) -> dict | None:
+    """:func:`fdem.results.analysis.boundary_motion` of the run's last triangle frame
+    (``slope_NNNNN.vtu`` or ``interrupted_state.vtu``, whichever was written last), for the
+    summaries written before the summary carried it; the frames hold the positions and the
+    displacement, so the reference positions are their difference (float32: 1e-5 m)."""
+    frames = sorted(run.glob("slope_[0-9]*.vtu")) + sorted(run.glob("interrupted_state.vtu"))
+    if not frames:
+        return None
+    frame = max(frames, key=lambda f: f.stat().st_mtime)
+    m = meshio.read(frame)
+    x = np.asarray(m.points[:, :2], np.float64)
+    return boundary_motion(x - np.asarray(m.point_data["displacement"][:, :2], np.float64), x)
+
+
+def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, str]]:
+    """(row, this run) pairs of the beside-the-paper table, read from ``summary`` (and
+    ``boundaries``, the boundary motion, where the summary has none)."""
     wf = summary.get("workflow") or {}
     stages = wf.get("stages") or []
     fos = wf.get("fos") or {}
@@ -88,6 +108,11 @@ def figures(summary: dict) -> list[tuple[str, str]]:
                                   f"than one triangle"))
     rows.append(("locked mass", f"{locked.get('area_m2', 0):.3g} m^2 ({100 * locked.get('share_of_failed', 0):.3g} % of "
                                 f"the failed mass)" if locked else "-"))
+    bnd = summary.get("boundaries") or boundaries
+    if bnd:
+        rows.append(("boundaries", "; ".join(f"{side} {d['max_displacement_m'] * 1e3:.3g} mm (slip along it "
+                                             f"{d['max_slip_m'] * 1e3:.3g} mm)" for side, d in bnd.items())
+                     + " at the end: the largest displacement of the nodes that started on each side"))
     if mid:
         rows.append(("mid-failure picture", f"t = {mid['time_s']:.3g} s, D90 {mid['d90_m']:.3g} m"))
     stopped = summary.get("outcome") in ("interrupted", "unstable", "write_error")
@@ -119,7 +144,7 @@ def main(argv=None) -> list[tuple[str, str]]:
     if summary.get("case") != "four-slopes" or not summary.get("workflow"):
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
-    rows = figures(summary)
+    rows = figures(summary, None if summary.get("boundaries") else last_frame_boundaries(args.run))
     print(f"| | this run: {name} |\n|---|---|")
     for k, v in rows:
         print(f"| {k} | {v} |")

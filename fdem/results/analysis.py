@@ -14,7 +14,7 @@ from fdem.mesh.triangles import triangle_areas
 
 __all__ = ["fragments", "fragment_areas", "weighted_percentile", "triangle_displacement", "displaced",
            "displacement_statistics", "runout", "deposit_profile", "failure_surface", "fragment_statistics",
-           "released_kinetic_energy", "history_columns", "crack_breakdown"]
+           "released_kinetic_energy", "history_columns", "crack_breakdown", "boundary_motion"]
 
 
 def fragments(topology: Topology, broken: np.ndarray) -> tuple[int, np.ndarray]:
@@ -144,6 +144,37 @@ def runout(topology: Topology, x: np.ndarray, toe_x: float, threshold: float = 0
         "off_model_area_m2": float(area[(xc[:, 0] < topology.x0[:, 0].min())
                                         | (xc[:, 0] > topology.x0[:, 0].max())].sum()),
     }
+
+
+def boundary_motion(x0: np.ndarray, x: np.ndarray, tolerance: float = 1e-6) -> dict[str, dict]:
+    """How far the model's own boundaries moved, from the nodes' reference positions ``x0`` and
+    positions ``x`` (n, 2) [m]: for each of its ``left``, ``right`` and ``base`` sides, the
+    nodes that started on it (``|X - X_side| <= tolerance * extent``), their largest
+    displacement ``max |x - X|`` [m] and its component along the side [m] (vertical for the
+    sides, horizontal for the base: the slip a roller lets through).
+
+    A boundary that takes no part in a failure stays where it was, to within the elastic
+    motion of the rock (millimetres); a failure that reaches it drags its nodes along the
+    roller by as much as the mass beside it moves. It does not show a boundary that *holds*:
+    a roller met by a joint whose slip it would have to let through keeps that joint shut and
+    stays put. That part is shown only by a wider model giving the same bracket and mechanism
+    (``docs/cases.md`` A, "Boundaries"); this figure is the one beside it."""
+    x0 = np.asarray(x0, dtype=np.float64)[:, :2]
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    if x.shape != x0.shape:
+        raise ValueError(f"positions must have the reference positions' shape {x0.shape}, got {x.shape}")
+    extent = float(max(np.ptp(x0[:, 0]), np.ptp(x0[:, 1]), 1e-300))
+    tol = tolerance * extent
+    u = x - x0
+    sides = {"left": (np.abs(x0[:, 0] - x0[:, 0].min()) <= tol, 1),
+             "right": (np.abs(x0[:, 0] - x0[:, 0].max()) <= tol, 1),
+             "base": (np.abs(x0[:, 1] - x0[:, 1].min()) <= tol, 0)}
+    out = {}
+    for name, (on, along) in sides.items():
+        out[name] = {"n_nodes": int(on.sum()),
+                     "max_displacement_m": float(np.linalg.norm(u[on], axis=1).max()) if on.any() else 0.0,
+                     "max_slip_m": float(np.abs(u[on, along]).max()) if on.any() else 0.0}
+    return out
 
 
 def deposit_profile(topology: Topology, x: np.ndarray, floor_y: float, bins, threshold: float = 0.1,

@@ -165,6 +165,7 @@ class RunReport:
             "n_triangles": topo.n_triangles, "n_crack_elements": topo.n_cracks,
             "runout": run,
             "displacement": analysis.displacement_statistics(topo, x),
+            "boundaries": analysis.boundary_motion(topo.x0, x),
             "kinetic_energy": {"peak_J_per_m": peak,
                                "final_J_per_m": float(hist[-1]["kinetic"]) if hist else 0.0,
                                "released_gravity_J_per_m": float(-hist[-1]["gravity_potential"]) if hist else 0.0,

@@ -63,6 +63,11 @@ def test_run_report_after_failure_and_runout(tmp_path):
     assert data["locked"]["failed_area_m2"] == data["runout"]["displaced_area_m2"]
     assert 0 <= data["locked"]["area_m2"] <= data["locked"]["failed_area_m2"]
     assert sim.history[-1]["failed_d90"] == data["locked"]["d90_m"]
+    # the block slides out of the face, far from the model's sides: they stay put while it moves
+    bnd = data["boundaries"]
+    assert set(bnd) == {"left", "right", "base"} and all(b["n_nodes"] > 0 for b in bnd.values())
+    assert all(b["max_slip_m"] <= b["max_displacement_m"] < 0.01 * data["runout"]["max_displacement_m"]
+               for b in bnd.values())
     # what the stages spent on frames, history rows and checkpoints is booked, and is part of their wall time
     cost = data["output_cost"]
     assert cost["seconds"]["frames"] > 0 and cost["seconds"]["history"] > 0

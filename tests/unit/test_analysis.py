@@ -3,7 +3,7 @@ fragments. Scenes with known answers: a block of an exploded mesh moved rigidly 
 import numpy as np
 import pytest
 
-from fdem.results.analysis import (deposit_profile, displacement_statistics, failure_surface, fragment_statistics, history_columns, runout, weighted_percentile)
+from fdem.results.analysis import (boundary_motion, deposit_profile, displacement_statistics, failure_surface, fragment_statistics, history_columns, runout, weighted_percentile)
 from fdem.mesh.mesh import structured_rectangle
 from fdem.mesh.topology import build_topology
 
@@ -132,3 +132,21 @@ def test_history_columns_from_rows_and_from_csv_dict():
     np.testing.assert_array_equal(t, t2)
     with pytest.raises(KeyError, match="kinetic"):
         history_columns({"time": t}, "kinetic")
+
+
+def test_boundary_motion_is_the_slip_of_the_nodes_that_started_on_each_side():
+    """The block cut from the left-hand side took its share of that side along (its rigid shift,
+    13.6 m, 4 m of it along the side) and left the right-hand side and the base at rest; nodes
+    then dragged 0.2 m down the right-hand side (a roller) show that slip and nothing else."""
+    x = moved_block()
+    still = boundary_motion(TOPO.x0, x)
+    assert still["left"]["max_displacement_m"] == pytest.approx(np.hypot(*SHIFT))
+    assert still["left"]["max_slip_m"] == pytest.approx(4.0)
+    assert still["right"]["max_displacement_m"] == 0.0 and still["base"]["max_displacement_m"] == 0.0
+    right = np.isclose(TOPO.x0[:, 0], 40.0) & (TOPO.x0[:, 1] > 5.0)
+    x[right] += [0.0, -0.2]
+    dragged = boundary_motion(TOPO.x0, x)
+    assert dragged["right"]["max_slip_m"] == pytest.approx(0.2)
+    assert dragged["right"]["max_displacement_m"] == pytest.approx(0.2)
+    assert dragged["base"]["max_displacement_m"] == 0.0 and dragged["left"] == still["left"]
+    assert dragged["right"]["n_nodes"] == np.isclose(TOPO.x0[:, 0], 40.0).sum()
