@@ -25,7 +25,8 @@ from fdem.solve.simulation import Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, response_time, run_stage
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "fundamental_damping",
-           "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS"]
+           "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
+           "TRIALS_MARK"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -38,6 +39,11 @@ DEFAULT_MAX_TRIALS = 40
 smallest (:data:`MIN_RELATIVE_TOL` of the upper end) bisection of a bracket ``[0, upper]``
 needs ``log2(1e6) + 2 = 22`` trials; the cap leaves room above that, and a search that meets
 it says so (``FoSResult.ended_by``)."""
+
+
+TRIALS_MARK = "fos_trials"
+"""The journal mark (:attr:`fdem.workflow.journal.RunJournal.marks`) holding a search's finished
+trials while it runs (:func:`factor_of_safety` ``journal``)."""
 
 
 def _real(value) -> bool:
@@ -243,7 +249,7 @@ def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Sta
 def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
                      trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
                      build=None, build_args: tuple = (), max_trials: int = DEFAULT_MAX_TRIALS,
-                     judge=None) -> FoSResult:
+                     judge=None, journal=None) -> FoSResult:
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
@@ -271,6 +277,15 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     judged by its permanent displacement, :class:`fdem.workflow.seismic.BaseShaking`); the trial
     stage then needs no converge rule. Without it a trial is stable when its stage converged.
     With ``workers > 1`` it must be picklable.
+
+    ``journal`` (a :class:`fdem.workflow.journal.RunJournal`): every finished trial is recorded
+    in it (its verdict and stage result; the first failing trial's broken elements and positions
+    for the picture) and the checkpoint is written, holding the search's start state. A trial
+    the journal already holds is not run again, so a search cut short (the end of a session in
+    a bisection of hours) goes on from its last finished trial when the run is resumed: the
+    trial under way is lost, never the ones before it. The trials are the same as in a search
+    that was never cut (each starts from the same state, and the bisection's points follow from
+    the verdicts alone), and ``wall_seconds`` counts the replayed trials' own.
     """
     from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
 
@@ -296,13 +311,35 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     tmp = None
     saved_env = None
 
-    def record(outcome) -> bool:
+    progress = journal.marks.setdefault(TRIALS_MARK, {"trials": [], "first_fail": None}) if journal else None
+    replayed = {float(d["factor"]): d for d in progress["trials"]} if progress else {}
+    replayed_wall = 0.0
+
+    def record(outcome, from_journal: bool = False) -> bool:
         t, info = outcome
         trials.append(t)
         if info is not None and (not first_fail or t.factor < first_fail["factor"]):
             first_fail.clear()
             first_fail.update(info)
+        if progress is not None and not from_journal:
+            # the trial's verdict, and the search's start state, onto disk before the next trial
+            progress["trials"].append(t.as_dict())
+            progress["first_fail"] = dict(first_fail) if first_fail else None
+            restore(sim, start)
+            trigger.reset(sim, start_factor)
+            journal.write(sim, f"factor-of-safety trial F = {t.factor:.6g}")
         return t.stable
+
+    def replay(factor: float) -> bool:
+        nonlocal replayed_wall
+        d = replayed[factor]
+        keep = {f.name for f in dataclasses.fields(StageResult)}
+        t = Trial(factor=factor, stable=bool(d["stable"]), time_capped=bool(d["time_capped"]),
+                  result=StageResult(**{k: v for k, v in d.items() if k in keep}))
+        ff = progress["first_fail"]
+        info = dict(ff) if ff is not None and not t.stable and float(ff["factor"]) == factor else None
+        replayed_wall += t.result.wall_seconds
+        return record((t, info), from_journal=True)
 
     if workers > 1:
         import multiprocessing
@@ -323,15 +360,18 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
 
     def run_many(factors: list[float]) -> list[bool]:
+        verdicts = {f: replay(f) for f in factors if f in replayed}
+        todo = [f for f in factors if f not in verdicts]
         if pool is None:
-            out = []
-            for f in factors:
+            for f in todo:
                 restore(sim, start)
-                out.append(record(_run_trial(sim, trigger, trial, f, judge)))
-            return out
-        futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)
-                   for f in factors]
-        return [record(fut.result()) for fut in futures]
+                verdicts[f] = record(_run_trial(sim, trigger, trial, f, judge))
+        else:
+            futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)
+                       for f in todo]
+            for f, fut in zip(todo, futures):
+                verdicts[f] = record(fut.result())
+        return [verdicts[f] for f in factors]
 
     try:
         ends = run_many([lower, upper])
@@ -373,7 +413,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                        failure_surface=first_fail.get("surface", np.zeros(0, np.int64)),
                        failure_broken=first_fail.get("broken", np.zeros(0, np.int64)),
                        failure_positions=first_fail.get("positions"), failure_mode=first_fail.get("mode"),
-                       wall_seconds=time.perf_counter() - wall, ended_by=ended_by, max_trials=int(max_trials))
+                       wall_seconds=time.perf_counter() - wall + replayed_wall, ended_by=ended_by,
+                       max_trials=int(max_trials))
+    if journal is not None:  # the search is whole: its caller records the result itself
+        journal.marks.pop(TRIALS_MARK, None)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)

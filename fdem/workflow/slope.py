@@ -262,10 +262,11 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
     else:
         if wf.fos is not None:
             lower, upper, tol = wf.fos
-            # its trials restart from this state and leave the simulation in it: a search cut
-            # short is run again whole on resume (from the equilibrium stage's checkpoint)
+            # its trials restart from this state and leave the simulation in it; the journal keeps
+            # each finished trial, so a search cut short goes on from its last one on resume
             summary["fos"] = (journal.once("fos", lambda: factor_of_safety(
-                sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict()) if journal is not None
+                sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal).as_dict())
+                if journal is not None
                 else factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict())
         if wf.reduction == "steps":
             for F in wf.factors:
@@ -377,7 +378,7 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) 
     def search():
         try:
             return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, trigger=GravityIncrease(),
-                                    out_dir=out_dir).as_dict()
+                                    out_dir=out_dir, journal=journal).as_dict()
         except BracketError as err:
             return {"fos": None, "bracket": [upper, None] if "stable" in str(err) else [None, lower],
                     "error": str(err)}

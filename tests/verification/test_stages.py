@@ -191,3 +191,44 @@ def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibr
     assert (tmp_path / "fos_start.npz").exists() and (tmp_path / "fos.json").exists()
     with pytest.raises(ValueError, match="needs build"):
         factor_of_safety(sim, workers=2)
+
+
+def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
+    """A bisection of hours must not be lost to the end of a session: stopped in its third trial,
+    the run's checkpoint holds the two finished trials and the search's start state; resumed on a
+    freshly built simulation it runs only the trials not yet finished, and ends with the trials,
+    verdicts, step counts and bracket of a search that was never cut."""
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.journal import RunJournal
+
+    wf = SlopeWorkflow(factors=(1.0,), fos=(1.0, 2.0, 0.1))  # the search, then one step that holds at once
+    whole = run_slope_workflow(planar_slope_scene().sim, wf)["fos"]
+    run_trial = fos_module._run_trial
+    calls = []
+
+    def stopped_in_the_third(sim, *args, **kwargs):
+        calls.append(args[2])
+        if len(calls) == 3:
+            raise KeyboardInterrupt("a signal")
+        return run_trial(sim, *args, **kwargs)
+
+    monkeypatch.setattr(fos_module, "_run_trial", stopped_in_the_third)
+    path = tmp_path / "checkpoint.npz"
+    cut = run_slope_workflow(planar_slope_scene().sim, wf, journal=RunJournal(path))
+    assert cut["outcome"] == "interrupted" and cut["fos"] is None
+    kept = fos_module.TRIALS_MARK
+    from fdem.solve.checkpoint import read_checkpoint
+    saved = read_checkpoint(path)["context"]["marks"][kept]["trials"]
+    assert [t["factor"] for t in saved] == calls[:2] == [t["factor"] for t in whole["trials"][:2]]
+
+    calls.clear()
+    monkeypatch.setattr(fos_module, "_run_trial", lambda sim, *a, **k: (calls.append(a[2]), run_trial(sim, *a, **k))[1])
+    sim = planar_slope_scene().sim
+    journal = RunJournal.resume_from(sim, path)
+    resumed = run_slope_workflow(sim, wf, journal=journal)["fos"]
+    assert calls == [t["factor"] for t in whole["trials"][2:]]   # only the trials not yet finished
+    assert [(t["factor"], t["stable"], t["steps"], t["reason"]) for t in resumed["trials"]] == \
+        [(t["factor"], t["stable"], t["steps"], t["reason"]) for t in whole["trials"]]
+    assert resumed["bracket"] == whole["bracket"] and resumed["fos"] == whole["fos"]
+    assert resumed["failure_broken_elements"] == whole["failure_broken_elements"]
+    assert kept not in journal.marks   # a finished search leaves only its result in later checkpoints
