@@ -60,6 +60,23 @@ def last_frame_boundaries(run: Path) -> dict | None:
     return boundary_motion(x - np.asarray(m.point_data["displacement"][:, :2], np.float64), x)
 
 
+def code_of(run: Path) -> str:
+    """The commit (and contact law) that began the run and those that carried it on, from its
+    ``run.json``; runs begun before it recorded them say so."""
+    try:
+        record = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return "-"
+    sources = [record.get("source")] + list(record.get("resumed_sources", []))
+    if not sources[0]:
+        return "not recorded (begun before run.json named its code)"
+    def one(src):
+        commit = (src.get("commit") or "installed package")[:7]
+        return commit + (" with local changes" if src.get("modified") else "")
+    names = list(dict.fromkeys(one(src) for src in sources if src))
+    return f"{', then '.join(names)}; contact: {sources[0].get('contact_law')}"
+
+
 def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, str]]:
     """(row, this run) pairs of the beside-the-paper table, read from ``summary`` (and
     ``boundaries``, the boundary motion, where the summary has none)."""
@@ -145,6 +162,7 @@ def main(argv=None) -> list[tuple[str, str]]:
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
     rows = figures(summary, None if summary.get("boundaries") else last_frame_boundaries(args.run))
+    rows.append(("code", code_of(args.run)))
     print(f"| | this run: {name} |\n|---|---|")
     for k, v in rows:
         print(f"| {k} | {v} |")

@@ -254,6 +254,7 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
         check_common(parser, args)
         record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
                       resumed_with=again, resumed_at=_now())
+        record["resumed_sources"] = record.get("resumed_sources", []) + [_source()]
         args.run_record = record
     else:
         args.run_record = {"case": name, "argv": [a for a in argv if a != "--overwrite"]}
@@ -300,7 +301,7 @@ def open_run(parser: argparse.ArgumentParser | None, args, name: str) -> None:
             if f.is_file() and (f.suffix in OUTPUT_SUFFIXES or f.name.endswith(".tmp.npz")):
                 f.unlink()
     _write_run_file(parser, out, {**record, "started": _now(), "outcome": "running", "fdem_version": _version(),
-                                  "pid": os.getpid()})
+                                  "source": _source(), "pid": os.getpid()})
 
 
 def _summary_case(folder: Path):
@@ -327,6 +328,31 @@ def _version() -> str:
         return version("fdem")
     except Exception:  # not installed (run from a source tree)
         return "unknown"
+
+
+def _source() -> dict:
+    """Which code this process runs: the ``path`` of the imported ``fdem`` package and, when it
+    lies in a Git checkout, its ``commit`` and whether ``fdem/`` differs from it (``modified``),
+    with the contact law (:data:`fdem.physics.contact.CONTACT_LAW`). A row of a results table is
+    then traced to the build that made it, also when runs are carried on from pinned checkouts
+    of older commits; ``commit`` is ``None`` for an installed package."""
+    import subprocess
+
+    from fdem.physics.contact import CONTACT_LAW
+
+    package = Path(__file__).resolve().parents[1]
+    out = {"path": str(package), "commit": None, "modified": None, "contact_law": CONTACT_LAW}
+    try:
+        git = ["git", "-C", str(package.parent)]
+        head = subprocess.run(git + ["rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
+        if head.returncode == 0:
+            out["commit"] = head.stdout.strip()
+            changes = subprocess.run(git + ["status", "--porcelain", "--", "fdem"], capture_output=True, text=True,
+                                     timeout=10)
+            out["modified"] = bool(changes.stdout.strip()) if changes.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        pass  # no git: the path and the law are still worth keeping
+    return out
 
 
 def _write_run_file(parser, folder: Path, record: dict) -> None:

@@ -104,7 +104,14 @@ def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
     resumed = fdem("run", "quick-start", "--resume", str(out))
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     # the run's own options come back, --quiet with them: the resume is read off run.json
-    assert json.loads((out / "run.json").read_text())["resumed"] == 1
+    record = json.loads((out / "run.json").read_text())
+    assert record["resumed"] == 1
+    # which code began the run and which carried it on: the package imported and the contact law
+    import fdem as package
+    from fdem.physics.contact import CONTACT_LAW
+    assert record["source"]["path"] == str(Path(package.__file__).resolve().parent)
+    assert record["source"]["contact_law"] == CONTACT_LAW
+    assert record["resumed_sources"] == [record["source"]]
     assert_same_run(uninterrupted, out)
     # the interrupted state is a checkpoint too: it loads (it has no journal, so it is not resumable)
     assert state(out / "interrupted_state.npz")["step"] > 0
