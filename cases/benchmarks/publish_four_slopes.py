@@ -10,6 +10,10 @@ the summary, so that a row is never typed twice:
 
     python cases/benchmarks/publish_four_slopes.py runs/rest2/low_fine_1.0_crest60_toe90
     python cases/benchmarks/publish_four_slopes.py runs/rate/high_fine_0.5_band5 --name high_fine_0.5_band5_rate
+    python cases/benchmarks/publish_four_slopes.py --overview     # every published run in one table
+
+Beside the summary goes ``<name>_run.json``: the run's ``run.json`` (its command, and the commits
+that began and carried it on) with the contact law its checkpoint was written under.
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
+from fdem.io.jsonable import write_json
 from fdem.results.analysis import boundary_motion
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -60,21 +65,86 @@ def last_frame_boundaries(run: Path) -> dict | None:
     return boundary_motion(x - np.asarray(m.point_data["displacement"][:, :2], np.float64), x)
 
 
-def code_of(run: Path) -> str:
-    """The commit (and contact law) that began the run and those that carried it on, from its
-    ``run.json``; runs begun before it recorded them say so."""
+EARLIER_LAW = "the lowest friction of the six faces of the two triangles (the law before 2026-11-25)"
+
+
+def contact_law_of(run: Path) -> str | None:
+    """The contact law the run's checkpoint was written under (``checkpoint.npz``, else
+    ``final_state.npz``): checkpoints of the earlier law name none (:data:`EARLIER_LAW`)."""
+    from fdem.solve.checkpoint import read_checkpoint
+
+    for name in ("checkpoint.npz", "final_state.npz"):
+        if (run / name).exists():
+            return (read_checkpoint(run / name).get("model") or {}).get("contact_law") or EARLIER_LAW
+    return None
+
+
+def code_of(run: Path, law: str | None) -> str:
+    """The commit that began the run and those that carried it on (its ``run.json``), and the
+    contact law of its checkpoint; runs begun before run.json recorded commits say so."""
     try:
         record = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
-        return "-"
+        record = {}
     sources = [record.get("source")] + list(record.get("resumed_sources", []))
-    if not sources[0]:
-        return "not recorded (begun before run.json named its code)"
+
     def one(src):
         commit = (src.get("commit") or "installed package")[:7]
         return commit + (" with local changes" if src.get("modified") else "")
+
     names = list(dict.fromkeys(one(src) for src in sources if src))
-    return f"{', then '.join(names)}; contact: {sources[0].get('contact_law')}"
+    return (f"{', then '.join(names)}" if names else "commit not recorded (begun before run.json named it)") \
+        + f"; contact: {law or '-'}"
+
+
+def overview(folder: Path = DOCS) -> list[dict]:
+    """One row per published run (``docs/cases/rest/<name>.json``), read from its summary and
+    ``<name>_run.json``: where each scene stands, in one table."""
+    rows = []
+    for path in sorted(folder.glob("*.json")):
+        if path.name.endswith("_run.json"):
+            continue
+        s = json.loads(path.read_text())
+        sidecar = path.with_name(path.stem + "_run.json")
+        law = json.loads(sidecar.read_text()).get("contact_law") if sidecar.exists() else None
+        wf = s.get("workflow") or {}
+        stages = wf.get("stages") or []
+        last = stages[-1] if stages else {}
+        run, ke, tags = s.get("runout") or {}, s.get("kinetic_energy") or {}, s.get("cracks_by_tag") or {}
+        stopped = s.get("outcome") in ("interrupted", "unstable", "write_error")
+        if stopped:
+            state = f"stopped at t = {s.get('simulated_time_s', 0):.3g} s, moving"
+        elif last.get("name", "").startswith("runout") and last.get("reason") == "converged":
+            state = f"at rest, t = {last.get('t_end', 0):.3g} s"
+        else:
+            state = f"{last.get('reason')} at t = {last.get('t_end', 0):.3g} s"
+        rate = any(st["name"].startswith("reduction_rate") for st in stages)
+        fos = (wf.get("fos") or {}).get("fos")
+        ext = s.get("extents_m") or {}
+        rows.append({
+            "name": path.stem, "scene": f"{s.get('scene')} ({s.get('joint_offset', 0):g})", "size": s.get("size_m"),
+            "triangles": s.get("n_triangles"),
+            "extents": f"{ext.get('crest_length', 0):g} / {ext.get('toe_length', 0):g}"
+                       + (f" / {ext['boundary_band']:g}" if ext.get("boundary_band") else ""),
+            "schedule": (f"rate to F = {wf.get('final_reduction', 0):.3g}" if rate
+                         else f"steps, failed at F = {wf.get('failed_at_factor') or 0:.3g}")
+                        + (f"; FoS {fos:.3f}" if fos is not None else ""),
+            "state": state, "max_displacement": run.get("max_displacement_m"), "runout": run.get("runout_distance_m"),
+            "area": run.get("displaced_area_m2"), "ke_peak": ke.get("peak_J_per_m"),
+            "broken": f"{(tags.get('rock') or {}).get('broken', 0):,} / {(tags.get('joints') or {}).get('broken', 0):,}",
+            "law": "faces in touch" if law and law != EARLIER_LAW else ("lowest of six" if law else "-"),
+        })
+    return rows
+
+
+def print_overview(rows: list[dict]) -> None:
+    print("| run (docs/cases/rest) | scene (joint offset) | size | triangles | crest / floor / band [m] | schedule | "
+          "state | max displacement | runout | displaced area | KE peak | broken rock / joints | contact |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['name']} | {r['scene']} | {r['size']} m | {r['triangles']:,} | {r['extents']} | {r['schedule']} | "
+              f"{r['state']} | {r['max_displacement']:.3g} m | {r['runout']:.3g} m | {r['area']:.3g} m^2 | "
+              f"{r['ke_peak'] / 1e6:.3g} MJ/m | {r['broken']} | {r['law']} |")
 
 
 def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, str]]:
@@ -150,10 +220,17 @@ def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, st
 
 def main(argv=None) -> list[tuple[str, str]]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run", type=Path, help="the run's folder (holding summary.json)")
+    parser.add_argument("run", type=Path, nargs="?", help="the run's folder (holding summary.json)")
     parser.add_argument("--name", default=None, help="the name in docs/cases/rest (default from the summary)")
     parser.add_argument("--dry-run", action="store_true", help="print the table, copy nothing")
+    parser.add_argument("--overview", action="store_true",
+                        help="print one table of every run published in docs/cases/rest, and nothing else")
     args = parser.parse_args(argv)
+    if args.overview:
+        print_overview(overview())
+        return []
+    if args.run is None:
+        parser.error("give a run's folder, or --overview")
     path = args.run / "summary.json"
     if not path.exists():
         parser.error(f"{path} does not exist: a run writes its summary when it ends or is stopped")
@@ -162,13 +239,19 @@ def main(argv=None) -> list[tuple[str, str]]:
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
     rows = figures(summary, None if summary.get("boundaries") else last_frame_boundaries(args.run))
-    rows.append(("code", code_of(args.run)))
+    law = contact_law_of(args.run)
+    rows.append(("code", code_of(args.run, law)))
     print(f"| | this run: {name} |\n|---|---|")
     for k, v in rows:
         print(f"| {k} | {v} |")
     if not args.dry_run:
         DOCS.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(path, DOCS / f"{name}.json")
+        try:
+            record = json.loads((args.run / "run.json").read_text())
+        except (OSError, ValueError):
+            record = {}
+        write_json(DOCS / f"{name}_run.json", {**record, "contact_law": law})
         for pic in PICTURES:
             if (args.run / f"{pic}.png").exists():
                 shutil.copyfile(args.run / f"{pic}.png", DOCS / f"{name}_{pic}.png")
