@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from fdem.io.jsonable import write_json
+from fdem.io.messages import say
 import math
 import numbers
 import time
@@ -321,6 +322,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         if info is not None and (not first_fail or t.factor < first_fail["factor"]):
             first_fail.clear()
             first_fail.update(info)
+        r = t.result
+        say(f"factor of safety: trial {len(trials)} at {trigger.name} {t.factor:.5g}: "
+            f"{'stable' if t.stable else 'failing'} ({r.reason} after {r.t_end - r.t_start:.3g} s, "
+            f"{r.wall_seconds:.3g} s of wall time{', replayed from the checkpoint' if from_journal else ''})")
         if progress is not None and not from_journal:
             # the trial's verdict, and the search's start state, onto disk before the next trial
             progress["trials"].append(t.as_dict())
