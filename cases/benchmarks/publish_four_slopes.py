@@ -53,13 +53,22 @@ def _mode(d: dict) -> str:
 
 def last_frame_boundaries(run: Path) -> dict | None:
     """:func:`fdem.results.analysis.boundary_motion` of the run's last triangle frame
-    (``slope_NNNNN.vtu`` or ``interrupted_state.vtu``, whichever was written last), for the
+    (``interrupted_state.vtu`` of a stopped run, else the last of ``slope.pvd``), for the
     summaries written before the summary carried it; the frames hold the positions and the
-    displacement, so the reference positions are their difference (float32: 1e-5 m)."""
-    frames = sorted(run.glob("slope_[0-9]*.vtu")) + sorted(run.glob("interrupted_state.vtu"))
-    if not frames:
+    displacement, so the reference positions are their difference (float32: 1e-5 m at the
+    hundreds of metres of these models)."""
+    from fdem.io.vtk import read_pvd
+
+    try:
+        stopped = json.loads((run / "summary.json").read_text()).get("outcome") == "interrupted"
+    except (OSError, ValueError):
+        stopped = False
+    if stopped and (run / "interrupted_state.vtu").exists():
+        frame = run / "interrupted_state.vtu"  # the state at the stop (a runout's: a run stopped in a search has none)
+    elif (run / "slope.pvd").exists() and read_pvd(run / "slope.pvd"):
+        frame = read_pvd(run / "slope.pvd")[-1][1]  # the series' last frame, in its own time order
+    else:
         return None
-    frame = max(frames, key=lambda f: f.stat().st_mtime)
     m = meshio.read(frame)
     x = np.asarray(m.points[:, :2], np.float64)
     return boundary_motion(x - np.asarray(m.point_data["displacement"][:, :2], np.float64), x)
@@ -89,12 +98,13 @@ def code_of(run: Path, law: str | None) -> str:
     sources = [record.get("source")] + list(record.get("resumed_sources", []))
 
     def one(src):
-        commit = (src.get("commit") or "installed package")[:7]
+        if not src:
+            return "commit not recorded"
+        commit = src["commit"][:7] if src.get("commit") else "an installed package"
         return commit + (" with local changes" if src.get("modified") else "")
 
-    names = list(dict.fromkeys(one(src) for src in sources if src))
-    return (f"{', then '.join(names)}" if names else "commit not recorded (begun before run.json named it)") \
-        + f"; contact: {law or '-'}"
+    names = list(dict.fromkeys(one(src) for src in sources))
+    return ", then ".join(names) + f"; contact: {law or '-'}"
 
 
 def overview(folder: Path = DOCS) -> list[dict]:

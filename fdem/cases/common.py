@@ -342,14 +342,22 @@ def _source() -> dict:
 
     package = Path(__file__).resolve().parents[1]
     out = {"path": str(package), "commit": None, "modified": None, "contact_law": CONTACT_LAW}
+    # only the checkout the package itself lies in (a package installed into a virtual
+    # environment inside some checkout is not that checkout's code); no index lock taken, so a
+    # commit made meanwhile in the same checkout is never refused
+    env = {k: v for k, v in os.environ.items() if k not in ("GIT_DIR", "GIT_WORK_TREE", "GIT_INDEX_FILE")}
+    git = ["git", "--no-optional-locks", "-C", str(package.parent)]
+
+    def ask(*args) -> str | None:
+        done = subprocess.run(git + list(args), capture_output=True, text=True, timeout=10, env=env)
+        return done.stdout.strip() if done.returncode == 0 else None
+
     try:
-        git = ["git", "-C", str(package.parent)]
-        head = subprocess.run(git + ["rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
-        if head.returncode == 0:
-            out["commit"] = head.stdout.strip()
-            changes = subprocess.run(git + ["status", "--porcelain", "--", "fdem"], capture_output=True, text=True,
-                                     timeout=10)
-            out["modified"] = bool(changes.stdout.strip()) if changes.returncode == 0 else None
+        top = ask("rev-parse", "--show-toplevel")
+        if top is not None and Path(top).resolve() == package.parent:
+            out["commit"] = ask("rev-parse", "HEAD")
+            changes = ask("status", "--porcelain", "--", "fdem")
+            out["modified"] = None if changes is None else bool(changes)
     except (OSError, subprocess.SubprocessError):
         pass  # no git: the path and the law are still worth keeping
     return out

@@ -920,6 +920,16 @@ class Simulation:
             for row in self.history:
                 self._history_writer.write(row)
 
+    def write_history_rows(self, rows: list[dict]) -> None:
+        """Write ``rows``, history rows this simulation made before a restart dropped them from
+        :attr:`history`, into ``history.csv`` again, as they were when made; :attr:`history` is
+        not changed. A factor-of-safety search replayed from a run's journal
+        (:func:`fdem.workflow.fos.factor_of_safety`) writes its finished trials' rows so, and
+        the file reads as that of a search never cut."""
+        if self._history_writer is not None:
+            for row in rows:
+                self._history_writer.write(row)
+
     def _write_state(self, stem: str, state: State) -> Path | None:
         if self.out_dir is None:
             return None

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from fdem.io.jsonable import write_json
-from fdem.io.messages import say
+from fdem.io.messages import say, warn
 import math
 import numbers
 import time
@@ -100,7 +100,10 @@ class StrengthReduction:
         _interfaces(sim).set_reduction(factor)
 
     def reset(self, sim: Simulation, factor: float) -> None:
-        _interfaces(sim).set_reduction(factor)
+        # a restored state already holds its factor: setting it again would re-project the
+        # crack elements onto their envelopes and move the state it should leave alone
+        if _interfaces(sim).reduction != factor:
+            _interfaces(sim).set_reduction(factor)
 
     def current(self, sim: Simulation) -> float:
         return _interfaces(sim).reduction
@@ -145,6 +148,9 @@ class Trial:
     stable: bool
     result: StageResult
     time_capped: bool = False
+    rows: list = field(default_factory=list, repr=False)
+    """The history rows the trial made (``history.csv``; the restore after it drops them from
+    ``sim.history``), kept for a replay from the run's journal."""
 
     def as_dict(self) -> dict:
         return {"factor": self.factor, "stable": self.stable, "time_capped": self.time_capped,
@@ -218,6 +224,7 @@ def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None
     converged, or ``judge(sim, result)`` when given), and for a failing trial what it broke
     (failure surface, broken elements, positions, modes)."""
     trigger.apply(sim, factor)
+    first_row = len(sim.history)
     result = run_stage(sim, _trial_stage_at(trial, factor), frames=False)
     stable = bool(judge(sim, result)) if judge is not None else result.reason == "converged"
     info = None
@@ -225,7 +232,8 @@ def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None
     if not stable and cracks is not None:
         info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
                     positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
-    return Trial(factor, stable, result, time_capped=bool(getattr(sim, "time_capped", False))), info
+    return Trial(factor, stable, result, time_capped=bool(getattr(sim, "time_capped", False)),
+                 rows=[dict(r) for r in sim.history[first_row:]]), info
 
 
 _WORKER: dict = {}
@@ -312,7 +320,17 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     tmp = None
     saved_env = None
 
-    progress = journal.marks.setdefault(TRIALS_MARK, {"trials": [], "first_fail": None}) if journal else None
+    search = {"lower": float(lower), "upper": float(upper), "tol": float(tol), "trigger": trigger.name,
+              "trial": trial.name, "max_time": trial.max_time}
+    progress = None
+    if journal is not None:
+        progress = journal.marks.get(TRIALS_MARK)
+        if progress is not None and progress.get("search") != search:
+            warn(f"factor of safety: the {len(progress['trials'])} trial(s) in the checkpoint belong to another "
+                 f"search ({progress.get('search')}); they are not replayed")
+            progress = None
+        if progress is None:
+            progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}
     replayed = {float(d["factor"]): d for d in progress["trials"]} if progress else {}
     replayed_wall = 0.0
 
@@ -328,7 +346,8 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             f"{r.wall_seconds:.3g} s of wall time{', replayed from the checkpoint' if from_journal else ''})")
         if progress is not None and not from_journal:
             # the trial's verdict, and the search's start state, onto disk before the next trial
-            progress["trials"].append(t.as_dict())
+            # (a worker's rows never reached this run's history.csv: none to write again)
+            progress["trials"].append({**t.as_dict(), "rows": t.rows if pool is None else []})
             progress["first_fail"] = dict(first_fail) if first_fail else None
             restore(sim, start)
             trigger.reset(sim, start_factor)
@@ -340,7 +359,8 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         d = replayed[factor]
         keep = {f.name for f in dataclasses.fields(StageResult)}
         t = Trial(factor=factor, stable=bool(d["stable"]), time_capped=bool(d["time_capped"]),
-                  result=StageResult(**{k: v for k, v in d.items() if k in keep}))
+                  result=StageResult(**{k: v for k, v in d.items() if k in keep}), rows=list(d.get("rows", [])))
+        sim.write_history_rows(t.rows)  # history.csv as the search never cut wrote it
         ff = progress["first_fail"]
         info = dict(ff) if ff is not None and not t.stable and float(ff["factor"]) == factor else None
         replayed_wall += t.result.wall_seconds
@@ -401,6 +421,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             failing = [f for f, st in zip(points, stable) if not st]
             hi = min(failing + [hi])
             lo = max([f for f, st in zip(points, stable) if st and f < hi] + [lo])
+    except BracketError:
+        if journal is not None:  # a search that cannot go on: nothing of it to carry in later checkpoints
+            journal.marks.pop(TRIALS_MARK, None)
+        raise
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)

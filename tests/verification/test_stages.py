@@ -194,41 +194,63 @@ def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibr
 
 
 def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
-    """A bisection of hours must not be lost to the end of a session: stopped in its third trial,
-    the run's checkpoint holds the two finished trials and the search's start state; resumed on a
-    freshly built simulation it runs only the trials not yet finished, and ends with the trials,
-    verdicts, step counts and bracket of a search that was never cut."""
+    """A bisection of hours must not be lost to the end of a session. Killed halfway through its
+    third trial (no handler runs: the checkpoint on disk is the one written after the second),
+    the run resumes on a freshly built simulation, runs only the trials not yet finished, and
+    ends as a search never cut: the same trials, verdicts and bracket, the same final state to
+    the bit after the stage that follows, and the same history.csv."""
+    from fdem.solve.checkpoint import read_checkpoint
     from fdem.workflow import fos as fos_module
     from fdem.workflow.journal import RunJournal
 
-    wf = SlopeWorkflow(factors=(1.0,), fos=(1.0, 2.0, 0.1))  # the search, then one step that holds at once
-    whole = run_slope_workflow(planar_slope_scene().sim, wf)["fos"]
+    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))  # the search, then a step that holds
+    whole_sim = planar_slope_scene(out_dir=tmp_path / "whole", pictures=False).sim
+    whole = run_slope_workflow(whole_sim, wf)
+    whole_sim.close()
     run_trial = fos_module._run_trial
     calls = []
 
-    def stopped_in_the_third(sim, *args, **kwargs):
+    class Killed(Exception):
+        pass
+
+    def killed_in_the_third(sim, *args, **kwargs):
         calls.append(args[2])
-        if len(calls) == 3:
-            raise KeyboardInterrupt("a signal")
+        if len(calls) == 3:  # partway through its steps, as a SIGKILL would
+            record_row = sim._record_row
+
+            def dies_on_the_fifth_row(*a, **k):
+                if sum(1 for r in sim.history if r["stage"].startswith("trial")) >= 5:
+                    raise Killed
+                return record_row(*a, **k)
+
+            monkeypatch.setattr(sim, "_record_row", dies_on_the_fifth_row)
         return run_trial(sim, *args, **kwargs)
 
-    monkeypatch.setattr(fos_module, "_run_trial", stopped_in_the_third)
-    path = tmp_path / "checkpoint.npz"
-    cut = run_slope_workflow(planar_slope_scene().sim, wf, journal=RunJournal(path))
-    assert cut["outcome"] == "interrupted" and cut["fos"] is None
-    kept = fos_module.TRIALS_MARK
-    from fdem.solve.checkpoint import read_checkpoint
-    saved = read_checkpoint(path)["context"]["marks"][kept]["trials"]
-    assert [t["factor"] for t in saved] == calls[:2] == [t["factor"] for t in whole["trials"][:2]]
+    monkeypatch.setattr(fos_module, "_run_trial", killed_in_the_third)
+    out = tmp_path / "cut"
+    cut_sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    with pytest.raises(Killed):
+        run_slope_workflow(cut_sim, wf, journal=RunJournal(out / "checkpoint.npz"))
+    cut_sim.close()
+    saved = read_checkpoint(out / "checkpoint.npz")["context"]["marks"][fos_module.TRIALS_MARK]["trials"]
+    assert [t["factor"] for t in saved] == calls[:2] == [t["factor"] for t in whole["fos"]["trials"][:2]]
 
     calls.clear()
     monkeypatch.setattr(fos_module, "_run_trial", lambda sim, *a, **k: (calls.append(a[2]), run_trial(sim, *a, **k))[1])
-    sim = planar_slope_scene().sim
-    journal = RunJournal.resume_from(sim, path)
-    resumed = run_slope_workflow(sim, wf, journal=journal)["fos"]
-    assert calls == [t["factor"] for t in whole["trials"][2:]]   # only the trials not yet finished
-    assert [(t["factor"], t["stable"], t["steps"], t["reason"]) for t in resumed["trials"]] == \
-        [(t["factor"], t["stable"], t["steps"], t["reason"]) for t in whole["trials"]]
-    assert resumed["bracket"] == whole["bracket"] and resumed["fos"] == whole["fos"]
-    assert resumed["failure_broken_elements"] == whole["failure_broken_elements"]
-    assert kept not in journal.marks   # a finished search leaves only its result in later checkpoints
+    sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    journal = RunJournal.resume_from(sim, out / "checkpoint.npz")
+    sim.continue_outputs()
+    resumed = run_slope_workflow(sim, wf, journal=journal)
+    sim.close()
+    assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]   # only the trials not yet finished
+    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
+    assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
+    assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
+    assert resumed["fos"]["failure_broken_elements"] == whole["fos"]["failure_broken_elements"]
+    assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
+        [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
+    a, b = whole_sim.state_dict(), sim.state_dict()
+    assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
+    assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
+    assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
+    assert fos_module.TRIALS_MARK not in journal.marks  # a finished search leaves only its result behind
