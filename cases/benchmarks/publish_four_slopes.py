@@ -27,7 +27,7 @@ import meshio
 import numpy as np
 
 from fdem.io.jsonable import write_json
-from fdem.results.analysis import boundary_motion
+from fdem.results.analysis import boundary_motion, displaced_areas
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs" / "cases" / "rest"
@@ -51,13 +51,17 @@ def _mode(d: dict) -> str:
     return f"I {m.get('I', 0)} / II {m.get('II', 0)} / mixed {m.get('mixed', 0)}"
 
 
-def last_frame_boundaries(run: Path) -> dict | None:
-    """:func:`fdem.results.analysis.boundary_motion` of the run's last triangle frame
+def last_frame_figures(run: Path) -> dict | None:
+    """``boundaries`` (:func:`fdem.results.analysis.boundary_motion`) and ``areas``
+    (:func:`fdem.results.analysis.displaced_areas`) of the run's last triangle frame
     (``interrupted_state.vtu`` of a stopped run, else the last of ``slope.pvd``), for the
-    summaries written before the summary carried it; the frames hold the positions and the
+    summaries written before the summary carried them; the frames hold the positions and the
     displacement, so the reference positions are their difference (float32: 1e-5 m at the
     hundreds of metres of these models)."""
+    from types import SimpleNamespace
+
     from fdem.io.vtk import read_pvd
+    from fdem.mesh.triangles import triangle_areas
 
     try:
         stopped = json.loads((run / "summary.json").read_text()).get("outcome") == "interrupted"
@@ -71,7 +75,10 @@ def last_frame_boundaries(run: Path) -> dict | None:
         return None
     m = meshio.read(frame)
     x = np.asarray(m.points[:, :2], np.float64)
-    return boundary_motion(x - np.asarray(m.point_data["displacement"][:, :2], np.float64), x)
+    x0 = x - np.asarray(m.point_data["displacement"][:, :2], np.float64)
+    tri = np.asarray(m.cells_dict["triangle"])
+    mesh = SimpleNamespace(x0=x0, triangles=tri, triangle_area0=triangle_areas(x0, tri), n_nodes=len(x0))
+    return {"boundaries": boundary_motion(x0, x), "areas": displaced_areas(mesh, x)}
 
 
 EARLIER_LAW = "the lowest friction of the six faces of the two triangles (the law before 2026-11-25)"
@@ -157,9 +164,9 @@ def print_overview(rows: list[dict]) -> None:
               f"{r['ke_peak'] / 1e6:.3g} MJ/m | {r['broken']} | {r['law']} |")
 
 
-def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, str]]:
+def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
     """(row, this run) pairs of the beside-the-paper table, read from ``summary`` (and
-    ``boundaries``, the boundary motion, where the summary has none)."""
+    ``frame``, :func:`last_frame_figures`, for the figures the summary does not carry)."""
     wf = summary.get("workflow") or {}
     stages = wf.get("stages") or []
     fos = wf.get("fos") or {}
@@ -191,7 +198,9 @@ def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, st
     rows.append(("runout beyond the toe", f"{run.get('runout_distance_m', 0):.3g} m (99th percentile by area), front "
                                           f"{run.get('runout_front_max_m', 0):.3g} m"
                                           + (f"; {off:.3g} m^2 left the model: a lower bound" if off > 0 else "")))
-    rows.append(("volume", f"{run.get('displaced_area_m2', 0):.3g} m^2 displaced more than 0.1 m (per metre)"))
+    areas = summary.get("displaced_area_m2") or (frame or {}).get("areas") or {}
+    rows.append(("volume", f"{run.get('displaced_area_m2', 0):.3g} m^2 displaced more than 0.1 m (per metre)"
+                 + (f"; {areas['1']:.3g} m^2 more than 1 m, {areas['10']:.3g} m^2 more than 10 m" if areas else "")))
     final = ke.get("final_J_per_m", 0)
     final_text = f"{final / 1e6:.3g} MJ/m" if final >= 1e5 else f"{final / 1e3:.3g} kJ/m"
     rows.append(("kinetic energy", f"peak {ke.get('peak_J_per_m', 0) / 1e6:.3g} MJ/m, {final_text} at the end; "
@@ -205,7 +214,7 @@ def figures(summary: dict, boundaries: dict | None = None) -> list[tuple[str, st
                                   f"than one triangle"))
     rows.append(("locked mass", f"{locked.get('area_m2', 0):.3g} m^2 ({100 * locked.get('share_of_failed', 0):.3g} % of "
                                 f"the failed mass)" if locked else "-"))
-    bnd = summary.get("boundaries") or boundaries
+    bnd = summary.get("boundaries") or (frame or {}).get("boundaries")
     if bnd:
         rows.append(("boundaries", "; ".join(f"{side} {d['max_displacement_m'] * 1e3:.3g} mm (slip along it "
                                              f"{d['max_slip_m'] * 1e3:.3g} mm)" for side, d in bnd.items())
@@ -248,7 +257,8 @@ def main(argv=None) -> list[tuple[str, str]]:
     if summary.get("case") != "four-slopes" or not summary.get("workflow"):
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
-    rows = figures(summary, None if summary.get("boundaries") else last_frame_boundaries(args.run))
+    rows = figures(summary, None if summary.get("boundaries") and summary.get("displaced_area_m2")
+                   else last_frame_figures(args.run))
     law = contact_law_of(args.run)
     rows.append(("code", code_of(args.run, law)))
     print(f"| | this run: {name} |\n|---|---|")

@@ -14,7 +14,8 @@ from fdem.mesh.triangles import triangle_areas
 
 __all__ = ["fragments", "fragment_areas", "weighted_percentile", "triangle_displacement", "displaced",
            "displacement_statistics", "runout", "deposit_profile", "failure_surface", "fragment_statistics",
-           "released_kinetic_energy", "history_columns", "crack_breakdown", "boundary_motion"]
+           "released_kinetic_energy", "history_columns", "crack_breakdown", "boundary_motion",
+           "displaced_areas", "AREA_THRESHOLDS"]
 
 
 def fragments(topology: Topology, broken: np.ndarray) -> tuple[int, np.ndarray]:
@@ -144,6 +145,19 @@ def runout(topology: Topology, x: np.ndarray, toe_x: float, threshold: float = 0
         "off_model_area_m2": float(area[(xc[:, 0] < topology.x0[:, 0].min())
                                         | (xc[:, 0] > topology.x0[:, 0].max())].sum()),
     }
+
+
+AREA_THRESHOLDS = (0.1, 1.0, 10.0)
+"""Displacements [m] at which :func:`displaced_areas` measures the displaced area."""
+
+
+def displaced_areas(topology: Topology, x: np.ndarray, thresholds=AREA_THRESHOLDS) -> dict[str, float]:
+    """Reference area [m^2 per metre] of the triangles whose centroid moved more than each
+    threshold [m], keyed by the threshold as written (``"0.1"``, ``"1"``, ``"10"``). The failed
+    mass at 0.1 m holds what crept and settled behind a slide as well as what ran out; the area
+    above 1 m is the part that ran, the one to set beside a runout volume."""
+    d = triangle_displacement(topology, x)
+    return {f"{t:g}": float(topology.triangle_area0[d > t].sum()) for t in thresholds}
 
 
 def boundary_motion(x0: np.ndarray, x: np.ndarray, tolerance: float = 1e-6) -> dict[str, dict]:

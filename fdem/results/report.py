@@ -164,6 +164,7 @@ class RunReport:
             "simulated_time_s": sim.state.time, "steps": sim.state.step, "dt_s": sim.dt,
             "n_triangles": topo.n_triangles, "n_crack_elements": topo.n_cracks,
             "runout": run,
+            "displaced_area_m2": analysis.displaced_areas(topo, x),
             "displacement": analysis.displacement_statistics(topo, x),
             "boundaries": analysis.boundary_motion(topo.x0, x),
             "kinetic_energy": {"peak_J_per_m": peak,

@@ -3,7 +3,7 @@ fragments. Scenes with known answers: a block of an exploded mesh moved rigidly 
 import numpy as np
 import pytest
 
-from fdem.results.analysis import (boundary_motion, deposit_profile, displacement_statistics, failure_surface, fragment_statistics, history_columns, runout, weighted_percentile)
+from fdem.results.analysis import (boundary_motion, deposit_profile, displaced_areas, displacement_statistics, failure_surface, fragment_statistics, history_columns, runout, weighted_percentile)
 from fdem.mesh.mesh import structured_rectangle
 from fdem.mesh.topology import build_topology
 
@@ -150,3 +150,14 @@ def test_boundary_motion_is_the_slip_of_the_nodes_that_started_on_each_side():
     assert dragged["right"]["max_displacement_m"] == pytest.approx(0.2)
     assert dragged["base"]["max_displacement_m"] == 0.0 and dragged["left"] == still["left"]
     assert dragged["right"]["n_nodes"] == np.isclose(TOPO.x0[:, 0], 40.0).sum()
+
+
+def test_displaced_areas_count_each_triangle_above_each_threshold():
+    """The block moved 13.6 m (60 m^2) and one strip of 20 cells 0.5 m (20 m^2): 80 m^2 moved
+    more than 0.1 m, 60 m^2 more than 1 m and 10 m, none more than 20 m."""
+    x = moved_block()
+    strip = (CENTROID0[:, 0] > 20.0) & (CENTROID0[:, 1] < 1.0)
+    x[TOPO.triangles[strip].ravel()] += [0.0, 0.5]
+    assert TOPO.triangle_area0[strip].sum() == pytest.approx(20.0)
+    assert displaced_areas(TOPO, x, (0.1, 1.0, 10.0, 20.0)) == pytest.approx({"0.1": 80.0, "1": 60.0, "10": 60.0,
+                                                                             "20": 0.0})
