@@ -96,6 +96,7 @@ def row(summary: dict) -> dict:
         "steps_bracket": [max(stable) if stable else None, failed], "outcome": summary.get("outcome"),
         "runout_to_rest": went_to_rest,
         "failed_area_m2": run.get("displaced_area_m2") if went_to_rest else None,
+        "area_moved_1m_m2": (summary.get("displaced_area_m2") or {}).get("1") if went_to_rest else None,
         "runout_distance_m": run.get("runout_distance_m") if went_to_rest else None,
         "max_displacement_m": run.get("max_displacement_m"),
         "kinetic_peak_J_per_m": (summary.get("kinetic_energy") or {}).get("peak_J_per_m") if went_to_rest else None,
@@ -128,8 +129,8 @@ def fmt(v, spec=".3g") -> str:
 
 
 def print_table(rows: list[dict]) -> None:
-    print("| scene (joint offset) | size | triangles | FoS (bisection) | bracket | steps bracket | outcome | failed area | runout | "
-          "KE peak | broken rock / joints | wall |")
+    print("| scene (joint offset) | size | triangles | FoS (bisection) | bracket | steps bracket | outcome | failed area "
+          "(> 0.1 m / > 1 m) | runout | KE peak | broken rock / joints | wall |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     prev = {}
     for r in rows:
@@ -140,7 +141,7 @@ def print_table(rows: list[dict]) -> None:
             moved = f" ({r['fos_bisection'] - p['fos_bisection']:+.3f})"
         print(f"| {r['scene']} ({fmt(r['joint_offset'], 'g')}) | {fmt(r['size_m'])} m | {fmt(r['n_triangles'])} | {fmt(r['fos_bisection'], '.3f')}{moved} | "
               f"{fmt(r['bisection_bracket'])} | {fmt(r['steps_bracket'])} | {r['outcome']} | "
-              f"{fmt(r['failed_area_m2'])} | {fmt(r['runout_distance_m'])} | {fmt(r['kinetic_peak_J_per_m'])} | "
+              f"{fmt(r['failed_area_m2'])} / {fmt(r.get('area_moved_1m_m2'))} | {fmt(r['runout_distance_m'])} | {fmt(r['kinetic_peak_J_per_m'])} | "
               f"{fmt(r['broken_rock'])} / {fmt(r['broken_joints'])} | {fmt(r['wall_seconds'], '.0f')} s |")
         prev[key] = r
 
