@@ -123,7 +123,9 @@ def overview(folder: Path = DOCS) -> list[dict]:
             continue
         s = json.loads(path.read_text())
         sidecar = path.with_name(path.stem + "_run.json")
-        law = json.loads(sidecar.read_text()).get("contact_law") if sidecar.exists() else None
+        side = json.loads(sidecar.read_text()) if sidecar.exists() else {}
+        law = side.get("contact_law")
+        areas = s.get("displaced_area_m2") or (side.get("last_frame") or {}).get("areas") or {}
         wf = s.get("workflow") or {}
         stages = wf.get("stages") or []
         last = stages[-1] if stages else {}
@@ -147,7 +149,7 @@ def overview(folder: Path = DOCS) -> list[dict]:
                          else f"steps, failed at F = {wf.get('failed_at_factor') or 0:.3g}")
                         + (f"; FoS {fos:.3f}" if fos is not None else ""),
             "state": state, "max_displacement": run.get("max_displacement_m"), "runout": run.get("runout_distance_m"),
-            "area": run.get("displaced_area_m2"), "ke_peak": ke.get("peak_J_per_m"),
+            "area": run.get("displaced_area_m2"), "area_1m": areas.get("1"), "ke_peak": ke.get("peak_J_per_m"),
             "broken": f"{(tags.get('rock') or {}).get('broken', 0):,} / {(tags.get('joints') or {}).get('broken', 0):,}",
             "law": "faces in touch" if law and law != EARLIER_LAW else ("lowest of six" if law else "-"),
         })
@@ -156,11 +158,12 @@ def overview(folder: Path = DOCS) -> list[dict]:
 
 def print_overview(rows: list[dict]) -> None:
     print("| run (docs/cases/rest) | scene (joint offset) | size | triangles | crest / floor / band [m] | schedule | "
-          "state | max displacement | runout | displaced area | KE peak | broken rock / joints | contact |")
+          "state | max displacement | runout | area moved > 0.1 m / > 1 m | KE peak | broken rock / joints | contact |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['name']} | {r['scene']} | {r['size']} m | {r['triangles']:,} | {r['extents']} | {r['schedule']} | "
-              f"{r['state']} | {r['max_displacement']:.3g} m | {r['runout']:.3g} m | {r['area']:.3g} m^2 | "
+              f"{r['state']} | {r['max_displacement']:.3g} m | {r['runout']:.3g} m | {r['area']:.3g} / "
+              f"{'-' if r['area_1m'] is None else format(r['area_1m'], '.3g')} m^2 | "
               f"{r['ke_peak'] / 1e6:.3g} MJ/m | {r['broken']} | {r['law']} |")
 
 
@@ -257,8 +260,8 @@ def main(argv=None) -> list[tuple[str, str]]:
     if summary.get("case") != "four-slopes" or not summary.get("workflow"):
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
-    rows = figures(summary, None if summary.get("boundaries") and summary.get("displaced_area_m2")
-                   else last_frame_figures(args.run))
+    frame = None if summary.get("boundaries") and summary.get("displaced_area_m2") else last_frame_figures(args.run)
+    rows = figures(summary, frame)
     law = contact_law_of(args.run)
     rows.append(("code", code_of(args.run, law)))
     print(f"| | this run: {name} |\n|---|---|")
@@ -271,7 +274,7 @@ def main(argv=None) -> list[tuple[str, str]]:
             record = json.loads((args.run / "run.json").read_text())
         except (OSError, ValueError):
             record = {}
-        write_json(DOCS / f"{name}_run.json", {**record, "contact_law": law})
+        write_json(DOCS / f"{name}_run.json", {**record, "contact_law": law, "last_frame": frame})
         for pic in PICTURES:
             if (args.run / f"{pic}.png").exists():
                 shutil.copyfile(args.run / f"{pic}.png", DOCS / f"{name}_{pic}.png")
