@@ -404,10 +404,16 @@ def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
     ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
     the model height ``H`` [m] under gravity ``g`` [m/s^2]); it stops ``left_model`` when a node
-    runs 1 % of ``H`` beyond the model's initial extent (off the end of the floor)."""
+    runs 1 % of ``H`` beyond the model's initial extent (off the end of the floor). It also ends
+    at rest when no node has moved more than 1 % of the failure displacement within 5 ``T``
+    (:class:`~fdem.workflow.stages.Convergence` ``drift``): a slope that crept and stopped rings
+    on at a kinetic energy that never falls to 1 % of its small peak (the high-angle coarse
+    slope: 0.05-0.3 J/m for 14 s after a peak of 5.5 J/m, 2.6 cm of creep)."""
     cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
+    fail_displacement = wf.fail_displacement or 0.01 * height
     return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
-                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T),
+                 converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T,
+                                      drift=0.01 * fail_displacement, drift_window=5.0 * T),
                  domain_margin=0.01 * height)
 
 

@@ -56,6 +56,15 @@ class Convergence:
     hold_for : simulated time [s] the limits must keep holding, check after check, before the
         stage ends (default 0: the first check that meets them); a runout that comes to rest
         and stays at rest
+    drift : alternative rest rule [m]: the stage has also converged when no monitored node has
+        moved more than ``drift`` within the last ``drift_window`` [s] of simulated time, whatever
+        the other limits say (default ``None``: no such rule). A slope that crept a few
+        centimetres and stopped keeps ringing elastically in an undamped stage at a kinetic
+        energy that never falls to a small share of its small peak; its positions stand still.
+        Moving less than ``drift`` per window, a mass cannot travel ``drift * n`` in ``n``
+        windows: the workflow's runout takes ``drift`` = 1 % of its failure displacement over
+        5 response times, so a mass declared at rest would need 100 windows to fail
+    drift_window : the window [s] of the drift rule (required with ``drift``)
     roundoff_factor : the ratio limit is raised to this multiple of the model's round-off floor
         :func:`fdem.solve.geostatic.unbalanced_ratio_floor` where that is higher (default 10;
         ``None``: the bare limit). Positions are stored in float64, and the crack penalties turn
@@ -73,6 +82,8 @@ class Convergence:
     min_time: float = 0.0
     hold_for: float = 0.0
     roundoff_factor: float | None = 10.0
+    drift: float | None = None
+    drift_window: float = 0.0
 
     def __post_init__(self):
         _positive_or_none(self.unbalanced_ratio, "Convergence.unbalanced_ratio")
@@ -83,6 +94,9 @@ class Convergence:
         if not (math.isfinite(self.hold_for) and self.hold_for >= 0):
             raise ValueError(f"Convergence.hold_for must be >= 0, got {self.hold_for!r}")
         _positive_or_none(self.roundoff_factor, "Convergence.roundoff_factor")
+        _positive_or_none(self.drift, "Convergence.drift")
+        if self.drift is not None and not (math.isfinite(self.drift_window) and self.drift_window > 0):
+            raise ValueError(f"Convergence.drift_window must be a positive time with drift, got {self.drift_window!r}")
         if self.unbalanced_ratio is None and self.kinetic_ratio is None and self.speed is None:
             raise ValueError("Convergence needs at least one of unbalanced_ratio, kinetic_ratio, speed")
 
@@ -379,6 +393,15 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
                 status["ratio"] = float(row["unbalanced_ratio"]) if row and "unbalanced_ratio" in row \
                     else unbalanced_force_ratio(s)
                 ok = status["ratio"] <= status["limit"]
+            if conv.drift is not None and not ok:
+                # still within drift of where the window began, for the whole window: at rest
+                if status.get("anchor") is None or _max_norm(s.state.x - status["anchor"], nodes) > conv.drift:
+                    status["anchor"], status["anchor_t"] = s.state.x.copy(), t
+                elif t - status["anchor_t"] >= stretch * conv.drift_window:
+                    status["reason"] = "converged"
+                    status["detail"] = (f"after {t:.4g} s: no node moved more than {conv.drift:.3g} m in the last "
+                                        f"{t - status['anchor_t']:.4g} s")
+                    return True
             if not ok:
                 status["since"] = None
             else:

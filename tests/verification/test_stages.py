@@ -254,3 +254,33 @@ def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monke
     assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
     assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
     assert fos_module.TRIALS_MARK not in journal.marks  # a finished search leaves only its result behind
+
+
+def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
+    """Undamped, a slope in equilibrium rings elastically for ever at a kinetic energy that no
+    small share of its own small peak bounds: the kinetic-energy rule alone runs such a stage to
+    its cap, the drift rule ends it once no node has moved 0.1 mm in one window. A block sliding
+    off its joint is never at rest by that rule: it fails first."""
+    s = planar_slope_scene()
+    sim = s.sim
+    T = response_time(sim.model)
+    r = run_stage(sim, Stage("equilibrium", max_time=10 * T, converge=Convergence(unbalanced_ratio=1e-4),
+                             damping=Damping.quasi_static()), frames=False)
+    assert r.reason == "converged"
+    start = sim.state_dict()
+    sim.state.v[:] += 1e-4  # a little ringing, as a creep leaves behind
+    ringing = Convergence(unbalanced_ratio=None, kinetic_ratio=1e-9, min_time=T, hold_for=T)
+    r = run_stage(sim, Stage("ringing", max_time=4 * T, converge=ringing), frames=False)
+    assert r.reason == "capped"
+    sim.load_state_dict(start)
+    sim.state.v[:] += 1e-4
+    still = Convergence(unbalanced_ratio=None, kinetic_ratio=1e-9, min_time=T, hold_for=T, drift=1e-4, drift_window=T)
+    r = run_stage(sim, Stage("still", max_time=4 * T, converge=still), frames=False)
+    assert r.reason == "converged" and "no node moved more than" in r.detail
+    assert 2 * T <= r.t_end - r.t_start < 4 * T  # min_time, then one whole window
+    sim.load_state_dict(start)
+    sliding = Stage("sliding", max_time=10 * T, reduction=4.0, converge=still, fail=Failure(displacement=0.02))
+    r = run_stage(sim, sliding, frames=False)
+    assert r.reason == "failed"
+    with pytest.raises(ValueError, match="drift_window"):
+        Convergence(drift=1e-3)
