@@ -53,12 +53,15 @@ def command(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, r
     return argv + ["--runout-time", str(runout_time)] if runout else argv + ["--runout-time", "0.001", "--no-pictures"]
 
 
+STOPPED = ("interrupted", "unstable", "write_error")
+"""Outcomes of a run that stopped before its end (it writes its summary too, and is resumed)."""
+
+
 def finished(out: Path) -> bool:
     """A run is done when its summary says how it ended, unless it was stopped (interrupted, an
     unstable step, a full disk): such a run writes its summary too, and is resumed."""
     path = out / "summary.json"
-    return path.exists() and json.loads(path.read_text()).get("outcome") not in ("interrupted", "unstable",
-                                                                                 "write_error")
+    return path.exists() and json.loads(path.read_text()).get("outcome") not in STOPPED
 
 
 def run_one(out: Path, angle: str, spacing: str, size: str, fos, runout: bool, runout_time: float = 60.0,

@@ -29,6 +29,9 @@ import numpy as np
 from fdem.io.jsonable import write_json
 from fdem.results.analysis import boundary_motion, displaced_areas
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from convergence_four_slopes import STOPPED  # noqa: E402  (one list of the outcomes of a run stopped part-way)
+
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs" / "cases" / "rest"
 PICTURES = ("mechanism", "kinetic_energy")
@@ -64,7 +67,7 @@ def last_frame_figures(run: Path) -> dict | None:
     from fdem.mesh.triangles import triangle_areas
 
     try:
-        stopped = json.loads((run / "summary.json").read_text()).get("outcome") == "interrupted"
+        stopped = ending(json.loads((run / "summary.json").read_text()))[0]
     except (OSError, ValueError):
         stopped = False
     if stopped and (run / "interrupted_state.vtu").exists():
@@ -79,6 +82,15 @@ def last_frame_figures(run: Path) -> dict | None:
     tri = np.asarray(m.cells_dict["triangle"])
     mesh = SimpleNamespace(x0=x0, triangles=tri, triangle_area0=triangle_areas(x0, tri), n_nodes=len(x0))
     return {"boundaries": boundary_motion(x0, x), "areas": displaced_areas(mesh, x)}
+
+
+def ending(summary: dict) -> tuple[bool, bool, dict]:
+    """``(stopped, at_rest, last stage)`` of a run's summary: stopped before its end (it
+    resumes), or at rest (its last stage a runout that converged)."""
+    stages = (summary.get("workflow") or {}).get("stages") or []
+    last = stages[-1] if stages else {}
+    stopped = summary.get("outcome") in STOPPED
+    return stopped, (not stopped and last.get("name", "").startswith("runout") and last.get("reason") == "converged"), last
 
 
 EARLIER_LAW = "the lowest friction of the six faces of the two triangles (the law before 2026-11-25)"
@@ -128,12 +140,11 @@ def overview(folder: Path = DOCS) -> list[dict]:
         areas = s.get("displaced_area_m2") or (side.get("last_frame") or {}).get("areas") or {}
         wf = s.get("workflow") or {}
         stages = wf.get("stages") or []
-        last = stages[-1] if stages else {}
         run, ke, tags = s.get("runout") or {}, s.get("kinetic_energy") or {}, s.get("cracks_by_tag") or {}
-        stopped = s.get("outcome") in ("interrupted", "unstable", "write_error")
+        stopped, at_rest, last = ending(s)
         if stopped:
             state = f"stopped at t = {s.get('simulated_time_s', 0):.3g} s, moving"
-        elif last.get("name", "").startswith("runout") and last.get("reason") == "converged":
+        elif at_rest:
             state = f"at rest, t = {last.get('t_end', 0):.3g} s"
         else:
             state = f"{last.get('reason')} at t = {last.get('t_end', 0):.3g} s"
@@ -180,7 +191,6 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
     frag = summary.get("fragments") or {}
     locked = summary.get("locked") or {}
     mid = summary.get("mid_failure") or {}
-    last = stages[-1] if stages else {}
     converged = [st["reduction"] for st in stages if st["reason"] == "converged" and not st["name"].startswith("runout")]
     crept = wf.get("crept_at_factors") or ([wf["crept_at_factor"]] if wf.get("crept_at_factor") else [])
     rows = []
@@ -224,8 +234,7 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
                      + " at the end: the largest displacement of the nodes that started on each side"))
     if mid:
         rows.append(("mid-failure picture", f"t = {mid['time_s']:.3g} s, D90 {mid['d90_m']:.3g} m"))
-    stopped = summary.get("outcome") in ("interrupted", "unstable", "write_error")
-    at_rest = not stopped and last.get("name", "").startswith("runout") and last.get("reason") == "converged"
+    stopped, at_rest, last = ending(summary)
     if stopped:  # the stage under way is not among the finished ones
         rest = f"no: {summary.get('ending') or summary.get('outcome')}, a run still going (it resumes)"
     else:
