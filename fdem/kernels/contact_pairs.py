@@ -101,6 +101,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from fdem.kernels.triangles import FASTMATH
 
 __all__ = ["N_OUT", "N_WORK", "MAX_VERT", "N_COL", "N_HIST", "FASTMATH", "TOUCH_EPS", "CLOSE_TOL",
            "PARALLEL_MIN_PAIRS", "N_IWORK", "pair_normal", "tangential_law", "chunk_bounds", "pair_forces",
@@ -139,10 +140,10 @@ the barycentric weights of the point they were applied at, in c (3) and in t (3)
 """Columns of a polygon vertex: x, y (frame at c's centroid), t's three, c's three barycentrics."""
 
 
-FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
-"""Fast-math flags of the narrow phase (no ``nnan``/``ninf``: NaNs still propagate). The
-separating-axis determinants (:func:`_sat`) are compiled strictly, so that touching corners
-give exact zeros (no fused multiply-add)."""
+# FASTMATH (imported above): the triangle kernels' flags, one set for both, so that fresh and
+# cached machine code agree (no ``reassoc``) and NaNs still propagate (no ``nnan``/``ninf``).
+# The separating-axis determinants (:func:`_sat`) are compiled strictly, so that touching
+# corners give exact zeros (no fused multiply-add).
 
 
 TOUCH_EPS = 1e-12

@@ -41,3 +41,56 @@ def test_a_change_outside_the_kernels_keeps_the_cache(tmp_path):
     (root / "workflow.py").write_text("import numba\ndef stage():\n    return 2\n")   # uses Numba, defines no kernel
     assert refresh_kernel_cache(root) is False
     assert sorted(p.name for p in root.rglob("__pycache__/*.nb?")) == cached
+
+
+_FRAGMENTED_BLOCK = """
+import hashlib, json
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from fdem.kernels import contact_pairs, stepping, triangles
+from fdem.mesh.mesh import structured_rectangle
+from fdem.physics.contact import ContactSet
+from fdem.physics.elastic import ElasticMaterial
+from fdem.solve.damping import Damping
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+
+mesh = structured_rectangle(30, 30, 10.0, 10.0)
+model = Model.from_mesh(mesh, ElasticMaterial(0.59e9, 0.29, 2680.0), exploded=True)
+model.set_gravity(0.0, -9.81)
+model.fix("bottom")
+contact = ContactSet(model.topology, penalty=5.9e9, friction_angle=30.0, damping_ratio=0.1, mass=model.node_mass())
+contact.activate_cracks(np.arange(model.topology.n_cracks))   # every face free: a heap of triangles
+sim = Simulation(model, providers=[contact], progress=False)
+sim.monitors.clear()
+for _ in range(400):
+    sim.step(Damping(mass_proportional=50.0))
+kernels = [k for m in (contact_pairs, stepping, triangles) for k in vars(m).values() if isinstance(k, CPUDispatcher)]
+print(json.dumps({"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
+                  "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest(),
+                  "hits": sum(sum(k.stats.cache_hits.values()) for k in kernels),
+                  "misses": sum(sum(k.stats.cache_misses.values()) for k in kernels)}))
+"""
+
+
+def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bits(tmp_path):
+    """A heap of 1,800 free triangles under gravity, 400 damped steps with contact on one thread,
+    run twice against an empty Numba cache: the first run compiles the kernels, the second loads
+    them. The two end states must agree to the bit, or a resumed run (which loads) is not the run
+    it resumes (which compiled). With the fast-math flag ``reassoc`` beside ``contract`` (the
+    flags before 2026-11-25) the two parted in both the triangle and the contact-pair kernels."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"), NUMBA_NUM_THREADS="1")
+    runs = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", _FRAGMENTED_BLOCK], env=env, capture_output=True, text=True,
+                             check=True, timeout=600)
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    fresh, cached = runs
+    assert fresh["misses"] > 0 and fresh["hits"] == 0, fresh      # compiled in the run
+    assert cached["hits"] > 0 and cached["misses"] == 0, cached    # every kernel loaded from the cache
+    assert (cached["x"], cached["v"]) == (fresh["x"], fresh["v"])
