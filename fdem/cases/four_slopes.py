@@ -43,7 +43,7 @@ import math
 from fdem.mesh.topology import INTACT
 from fdem.geometry.joint_sets import BrickSet
 from fdem.geometry.section import Geometry
-from fdem.geometry.polygons import simple_slope
+from fdem.geometry.polygons import ground_surface, simple_slope
 from fdem.physics.crack_properties import CrackProperties
 from fdem.io.jsonable import write_json
 
@@ -189,13 +189,25 @@ def build(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
     return geometry, mesh, build_topology(mesh)
 
 
-def ground_surface(slope):
-    """``y_s(x)``: the top of the slope profile, for the geostatic initial stress."""
-    v = slope.vertices
-    x0, _, x1, _ = slope.bounds
-    top = v[(v[:, 1] > 0) & ~(((v[:, 0] == x0) | (v[:, 0] == x1)) & (v[:, 1] == 0))]
-    top = top[np.argsort(top[:, 0], kind="stable")]
-    return lambda x: np.interp(x, top[:, 0], top[:, 1])
+def _tell_start_against_final_strength(cracks, geometry, workflow, tensile: str) -> dict:
+    """Before any step: the start's static stress against the strength the schedule ends at
+    (:func:`fdem.workflow.slope.start_against_strength`). The paper's rate always reaches its end
+    (F = 3.33), and with Table 1's strengths the static stress under the level ground is beyond
+    that strength below a few metres of cover: the schedule then fails the ground as well as the
+    slope, which a user should know before hours of it (``docs/cases.md`` A)."""
+    from fdem.workflow.slope import final_factor, start_against_strength
+
+    check = start_against_strength(cracks, geometry.bodies[0], final_factor(workflow))
+    level = check["level_ground"]
+    if workflow.reduction == "rate" and level["over"]:
+        cover = level["shallowest_cover_m"]
+        depth = f" from {cover:.1f} m of cover down" if cover is not None else ""
+        warn(f"at the schedule's end (F = {check['factor']:.3g}, f_t {tensile}) the static stress of the start is "
+             f"beyond the strength of {check['over']:,} of {check['elements']:,} crack elements "
+             f"({check['joints_over']:,} of {check['joints']:,} on joints); under the level ground more than one "
+             f"slope height from the face, {level['over']:,} of {level['elements']:,}{depth}: the schedule fails the "
+             f"ground as well as the slope (docs/cases.md A, the paper's schedule)")
+    return check
 
 
 def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, start: str = "static",
@@ -410,6 +422,7 @@ def main(argv=None) -> dict:
     if args.max_steps != 0:
         sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet)
         cracks.interfaces.reduce_tensile = tensile == "reduced"
+        summary["start_at_final_factor"] = _tell_start_against_final_strength(cracks, geometry, workflow, tensile)
         stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
         toe_x, toe_y = slope_toe(geometry.bodies[0])
         run_report = RunReport(sim, toe_x=toe_x, floor_y=toe_y)

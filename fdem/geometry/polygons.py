@@ -2,7 +2,8 @@
 
 A :class:`Polygon` is a simple, counter-clockwise ring of vertices (m); :func:`simple_slope`,
 :func:`benched_slope`, :func:`rectangle` and :func:`disc` build the usual ones, and
-:func:`slope_toe` finds the toe of a slope outline (toe on the left, crest on the right)."""
+:func:`slope_toe` and :func:`slope_crest` find the toe and crest of a slope outline (toe on the
+left, crest on the right), :func:`ground_surface` its top as a function of x."""
 from __future__ import annotations
 
 import math
@@ -10,7 +11,8 @@ from dataclasses import dataclass
 from typing import Sequence
 import numpy as np
 
-__all__ = ["signed_area", "Polygon", "simple_slope", "benched_slope", "rectangle", "disc", "slope_toe"]
+__all__ = ["signed_area", "Polygon", "simple_slope", "benched_slope", "rectangle", "disc", "slope_toe", "slope_crest",
+           "ground_surface"]
 
 
 def _as_points(vertices, what: str) -> np.ndarray:
@@ -208,3 +210,21 @@ def slope_toe(polygon) -> tuple[float, float]:
         raise ValueError("slope_toe: the polygon has no vertex above its base")
     floor_y = above[:, 1].min()
     return float(above[above[:, 1] == floor_y, 0].max()), float(floor_y)
+
+
+def slope_crest(polygon) -> tuple[float, float]:
+    """``(x, y)`` of the crest of a slope polygon whose toe is on the left: the leftmost vertex
+    at the greatest height (where the face meets the crest plateau)."""
+    v = np.asarray(getattr(polygon, "vertices", polygon), dtype=np.float64)
+    top_y = v[:, 1].max()
+    return float(v[v[:, 1] == top_y, 0].min()), float(top_y)
+
+
+def ground_surface(slope):
+    """``y_s(x)``: the top of a slope profile (the polygon's vertices above its base, left to
+    right, linearly interpolated), for a geostatic stress or the cover depth ``y_s(x) - y``."""
+    v = slope.vertices
+    x0, _, x1, _ = slope.bounds
+    top = v[(v[:, 1] > 0) & ~(((v[:, 0] == x0) | (v[:, 0] == x1)) & (v[:, 1] == 0))]
+    top = top[np.argsort(top[:, 0], kind="stable")]
+    return lambda x: np.interp(x, top[:, 0], top[:, 1])

@@ -162,7 +162,8 @@ class CrackSet:
     ``broken`` (n,) bool, ``dissipated`` (n, 3), ``crack_fields()``, ``events`` (structured
     array, :data:`EVENT_DTYPE`), ``newly_broken`` (ids broken by the last :meth:`add_forces`,
     for contact to pick up their faces), ``residual_friction`` (n,) ``tan(phi_res)`` for contact,
-    ``active`` (ids of live elements).
+    ``active`` (ids of live elements), ``preload_forces`` ((n, 2, 2) [N/m] or ``None``: the end
+    forces :meth:`set_preload` was given).
     """
 
     def __init__(self, topology: Topology, property_sets: Mapping[int, CrackProperties] | Sequence[CrackProperties],
@@ -247,6 +248,7 @@ class CrackSet:
         self._state = np.zeros((n, K.N_STATE))
         self._diss = np.zeros((n, K.N_DISS))
         self._offset = np.zeros((n, K.N_OFFSET))
+        self.preload_forces = None  # (n, 2, 2) [N/m] once set_preload has run: the start's static end forces
         self._dil = np.zeros((n, K.N_DIL))
         self._fill_constants()
         self.interfaces.subscribe(self._fill_constants, check=self._check_snap_back)
@@ -436,6 +438,7 @@ class CrackSet:
             off[:, K.CO_O0 + K.CO_END * e] = fn / (np.where(fn > 0.0, self.kn, self.kc) * w)
             off[:, K.CO_S0 + K.CO_END * e] = ft / (self.kt * w)
         self._offset[:] = off[self._perm]
+        self.preload_forces = F.copy()  # kept to check the start against a later strength (geostatic.crack_strength_check)
 
     # ------------------------------------------------------------------ active list
     def _set_active(self, alive: np.ndarray) -> None:

@@ -463,21 +463,27 @@ def crack_preload_forces(model, stress) -> np.ndarray:
     return F.reshape(n_crack, 2, 2)
 
 
-def _crack_strengths(cracks) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _crack_strengths(cracks, reduction: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(n,) ``f_t`` [Pa], ``c`` [Pa], ``tan(phi)`` of every element as its law uses them now
-    (strength multiplier and strength reduction applied)."""
+    (strength multiplier and strength reduction applied), or under the reduction factor
+    ``reduction`` when it is given."""
     interfaces = getattr(cracks, "interfaces", None)
     if interfaces is not None:  # the crack set's own per-element strengths under the reduction F
-        ft, c, tanphi = cracks._element_strengths(interfaces.reduction)[:3]
+        ft, c, tanphi = cracks._element_strengths(interfaces.reduction if reduction is None else reduction)[:3]
         return ft, c, tanphi
+    if reduction is not None:
+        raise ValueError(f"crack_strength_check: {type(cracks).__name__} has no strength reduction "
+                         f"(interfaces) to evaluate at F = {reduction:g}")
     factor = cracks.strength_factor
     P = cracks.props[cracks.tag]
     h = cracks.strength_multiplier
     return P[:, CP_FT] * h * factor, P[:, CP_C] * h * factor, P[:, CP_TANPHI] * factor
 
 
-def crack_strength_check(cracks, forces) -> dict:
-    """Crack-element ends whose preload traction is above strength at the current strength factor.
+def crack_strength_check(cracks, forces, reduction: float | None = None) -> dict:
+    """Crack-element ends whose preload traction is above strength at the current strength
+    factor, or at the strength-reduction factor ``reduction`` when it is given (what a schedule
+    that ends there does to the start's stress, before it runs).
 
     Per end: ``T = F / (L0/2)`` [Pa], ``sigma_n = T . n`` (tension positive), ``tau = T . t``;
     tensile failure if ``sigma_n > f_t``, shear if ``|tau| > c + max(-sigma_n, 0) tan(phi)``
@@ -492,7 +498,7 @@ def crack_strength_check(cracks, forces) -> dict:
     T = F / (0.5 * np.asarray(topo.crack_length0, float))[:, None, None]
     sig = (T * normal[:, None, :]).sum(-1)
     tau = (T * tangent[:, None, :]).sum(-1)
-    ft, c, tanphi = (a[:, None] for a in _crack_strengths(cracks))
+    ft, c, tanphi = (a[:, None] for a in _crack_strengths(cracks, reduction))
     shear_strength = c + np.maximum(-sig, 0.0) * tanphi
     tensile = np.flatnonzero((sig > ft).any(axis=1))
     shear = np.flatnonzero((np.abs(tau) > shear_strength).any(axis=1))

@@ -35,13 +35,14 @@ import numbers
 from dataclasses import dataclass, field
 import numpy as np
 from fdem.solve.damping import NO_DAMPING, Damping
-from fdem.solve.geostatic import rayleigh_frequency, unbalanced_force_ratio
+from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
+from fdem.solve.geostatic import crack_strength_check, rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import (BracketError, GravityIncrease, check_bracket, default_trial_stage, factor_of_safety,
                                fundamental_damping)
 
-__all__ = ["reduction_steps", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
+__all__ = ["reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures"]
 
 
@@ -434,3 +435,59 @@ def factor_of_safety_figures(result: dict) -> dict:
                 "fos_method": "reduction steps"}
     lo = max(stable)
     return {"fos": 0.5 * (lo + failing), "fos_bracket": [lo, failing], "fos_method": "reduction steps"}
+
+
+def final_factor(wf: SlopeWorkflow) -> float:
+    """The strength-reduction factor a schedule ends at: ``1 / final_strength`` at the rate,
+    the last of ``factors`` in steps (both 1/0.3 by default)."""
+    return 1.0 / wf.final_strength if wf.reduction == "rate" else float(wf.factors[-1])
+
+
+def start_against_strength(cracks, slope, factor: float) -> dict:
+    """The static start's stress against the strength at the reduction factor ``factor``, before
+    any step: which crack elements a schedule that ends there must make yield whatever the slope
+    does, and whether the level ground does too.
+
+    ``cracks`` must have been pre-loaded by the static start (``cracks.preload_forces``,
+    :func:`fdem.solve.geostatic.geostatic_start`); ``slope``: the slope polygon (toe on the
+    left). An element is over strength when an end's traction exceeds Mohr-Coulomb with the
+    tension cut-off (:func:`fdem.solve.geostatic.crack_strength_check` at ``factor``). The level
+    ground is where the element's midpoint lies more than one slope height ``H`` in front of the
+    toe or behind the crest; its cover is the depth below the ground surface (the shallowest
+    reported among elements at least half the median element length: slivers at joint crossings
+    carry noisy end tractions). Under level ground
+    in uniaxial strain a plane is over strength below a depth ``z*`` that
+    :func:`fdem.reference.level_ground.slip_depth` gives in closed form.
+
+    Returns ``{"factor", "elements", "over", "joints", "joints_over", "level_ground": {"elements",
+    "over", "joints", "joints_over", "shallowest_cover_m", "joints_shallowest_cover_m"}}``
+    (covers ``None`` where nothing is over).
+    """
+    forces = getattr(cracks, "preload_forces", None)
+    if forces is None:
+        raise ValueError("start_against_strength: the crack set has no static preload (run geostatic_start "
+                         "with it first)")
+    over = crack_strength_check(cracks, forces, reduction=factor)
+    topo = cracks.topology
+    flagged = np.zeros(topo.n_cracks, bool)
+    flagged[np.union1d(over["tensile"], over["shear"])] = True
+    mid = np.asarray(topo.x0, float)[np.asarray(topo.crack_nodes)].mean(axis=1)
+    toe_x, toe_y = slope_toe(slope)
+    crest_x, crest_y = slope_crest(slope)
+    height = crest_y - toe_y
+    level = (mid[:, 0] < toe_x - height) | (mid[:, 0] > crest_x + height)
+    cover = ground_surface(slope)(mid[:, 0]) - mid[:, 1]
+    joints = np.asarray(topo.crack_tag) > 0
+    length = np.asarray(topo.crack_length0, float)
+    whole = length >= 0.5 * np.median(length)  # a sliver's end tractions are discretization noise
+
+    def shallowest(sel):
+        sel = sel & whole
+        return float(cover[sel].min()) if sel.any() else None
+
+    return {"factor": float(factor), "elements": int(topo.n_cracks), "over": int(flagged.sum()),
+            "joints": int(joints.sum()), "joints_over": int((flagged & joints).sum()),
+            "level_ground": {"elements": int(level.sum()), "over": int((flagged & level).sum()),
+                             "joints": int((level & joints).sum()), "joints_over": int((flagged & level & joints).sum()),
+                             "shallowest_cover_m": shallowest(flagged & level),
+                             "joints_shallowest_cover_m": shallowest(flagged & level & joints)}}

@@ -211,3 +211,74 @@ def test_geostatic_start_refuses_to_overwrite_initial_stress():
     assert unbalanced_force_ratio(sim) < 1e-10
     sim.step()
     assert unbalanced_force_ratio(sim) < 1e-10
+
+
+def test_slip_depth_is_where_mohr_coulomb_is_met_under_level_ground():
+    """The closed form z* of fdem.reference.level_ground: at z* the plane's shear traction equals
+    c + sigma_n tan(phi) in the uniaxial-strain state, above it the plane holds, below it not;
+    a plane whose friction carries the stress ratio (or a horizontal one) holds at every depth."""
+    from fdem.reference.level_ground import k0_uniaxial_strain, plane_tractions_per_depth, slip_depth
+
+    k0, gamma = k0_uniaxial_strain(NU), RHO * G
+    for c, phi, dip in [(15e3, 3.34, 15.0), (15e3, 3.34, 115.0), (30e3, 9.83, 60.0)]:
+        z = slip_depth(c, phi, dip, gamma, k0)
+        sn, tau = plane_tractions_per_depth(dip, k0)
+        margin = lambda depth: tau * gamma * depth - (c + sn * gamma * depth * np.tan(np.radians(phi)))  # noqa: E731
+        assert margin(z) == pytest.approx(0.0, abs=1e-6 * c)
+        assert margin(0.99 * z) < 0 < margin(1.01 * z)
+    assert slip_depth(50e3, 11.0, 15.0, gamma, k0) == np.inf   # the paper's joints at full strength, dip 15 deg
+    assert slip_depth(0.0, 30.0, 0.0, gamma, k0) == np.inf      # no shear on a horizontal plane
+
+
+def test_the_papers_schedule_end_puts_level_ground_beyond_strength():
+    """The four-slope paper reduces c and tan(phi) of every crack element to 30 % (F = 3.33,
+    f_t kept). Its static start under the level ground is the uniaxial-strain state, so at that
+    factor the persistent joints (dip 15 deg) are over strength below z* = 6.2 m of cover and the
+    cross joints (dip 75 deg the other way) below 4.7 m (fdem.reference.level_ground), before any
+    step: start_against_strength must flag every joint element of the level ground whose midpoint
+    lies more than an element size below z* and none more than a size above it. At F = 1 no
+    persistent joint there is over strength (z* infinite)."""
+    from fdem.cases import four_slopes as fs
+    from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
+    from fdem.reference.level_ground import k0_uniaxial_strain, slip_depth
+    from fdem.solve.geostatic import crack_strength_check
+    from fdem.workflow.slope import SlopeWorkflow, final_factor, start_against_strength
+
+    size = 2.0
+    extents = fs.resolve_extents("low", {k: None for k in fs.EXTENTS_BEFORE_PINNING}, None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geometry, _, topo = fs.build("low", "coarse", size, None, None, extents=extents)
+    _, cracks = fs.simulation(geometry, topo, None, pictures=False, progress=False)
+    cracks.interfaces.reduce_tensile = False                     # the paper's f_t, untouched
+    F = final_factor(SlopeWorkflow(reduction="rate"))
+    assert F == pytest.approx(1 / 0.3)
+    slope = geometry.bodies[0]
+    check = start_against_strength(cracks, slope, F)
+    over = crack_strength_check(cracks, cracks.preload_forces, reduction=F)
+    flagged = np.zeros(topo.n_cracks, bool)
+    flagged[np.union1d(over["tensile"], over["shear"])] = True
+    assert check["over"] == flagged.sum() and check["level_ground"]["over"] > 0
+
+    x0, cn = np.asarray(topo.x0), np.asarray(topo.crack_nodes)
+    mid = x0[cn].mean(axis=1)
+    d = x0[cn[:, 1]] - x0[cn[:, 0]]
+    strike = np.degrees(np.arctan2(d[:, 1], d[:, 0])) % 180.0
+    (tx, ty), (cx, cy) = slope_toe(slope), slope_crest(slope)
+    level = (mid[:, 0] < tx - (cy - ty)) | (mid[:, 0] > cx + (cy - ty))
+    cover = ground_surface(slope)(mid[:, 0]) - mid[:, 1]
+    whole = np.asarray(topo.crack_length0) > size / 2            # no sliver: its end tractions are noise
+    joint = (np.asarray(topo.crack_tag) > 0) & level & whole
+    persistent = joint & (np.abs(strike - 15.0) < 5.0)
+    cross = joint & ~persistent
+    k0, gamma = k0_uniaxial_strain(fs.POISSON), fs.DENSITY * fs.GRAVITY
+    c, phi = 50e3 / F, np.degrees(np.arctan(np.tan(np.radians(11.0)) / F))
+    for kind, dip in ((persistent, 15.0), (cross, -75.0)):
+        z = slip_depth(c, phi, dip, gamma, k0)
+        shallow, deep = kind & (cover < z - size), kind & (cover > z + size)
+        assert shallow.sum() >= 10 and deep.sum() >= 10
+        assert not flagged[shallow].any(), (dip, z, cover[shallow & flagged])
+        assert flagged[deep].all(), (dip, z, cover[deep & ~flagged])
+    at_one = start_against_strength(cracks, slope, 1.0)
+    ids = np.union1d(*(crack_strength_check(cracks, cracks.preload_forces, reduction=1.0)[k] for k in ("tensile", "shear")))
+    assert not persistent[ids].any() and at_one["factor"] == 1.0
