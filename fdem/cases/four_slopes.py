@@ -141,7 +141,10 @@ instead, and the whole package above it slid off that roller (1.0 m, 2026-11-24)
 dipping into the model break beside the right-hand roller already at F = 1 (23 elements at
 1.0 m), and 5 m bands of intact rock along the sides stop it there; in a model with a crest of
 4 H one joint 7-13 m inside the band still breaks at F = 1, so the high-angle treatment is not
-settled (``docs/cases.md`` A, "Boundaries"). :func:`four_slope_geometry`
+settled (``docs/cases.md`` A, "Boundaries"). Part of it is the start, not the boundary: in the
+static start's uniaxial-strain state the high-angle persistent joints (65 deg) are beyond
+Mohr-Coulomb at F = 1 below 15 m of cover (:func:`fdem.reference.level_ground.slip_depth`), so
+under the crest's 30 m they slip at F = 1 wherever they are. :func:`four_slope_geometry`
 keeps the smaller extents of its own defaults (the verification tests and benchmarks use them)."""
 
 EXTENTS_BEFORE_PINNING = {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
