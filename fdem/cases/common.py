@@ -239,7 +239,8 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
             parser.error(f"--resume {folder}: no readable {RUN_FILE} there; is it the --out folder of a run?")
         if record.get("case") != name:
             parser.error(f"--resume {folder}: that folder holds a run of {record.get('case')!r}, not {name!r}")
-        if not any(folder.glob("checkpoint.npz")) and not any(folder.glob("*/checkpoint.npz")):
+        # checkpoint.npz, or a search's own (search_checkpoint.npz, a run stopped in its search)
+        if not any(folder.glob("*checkpoint.npz")) and not any(folder.glob("*/*checkpoint.npz")):
             parser.error(f"--resume {folder}: no checkpoint.npz there (the run wrote none before it stopped)")
         if record.get("outcome") not in (None, "interrupted", "unstable", "running", "error", "write_error"):
             parser.error(f"--resume {folder}: that run has finished (outcome {record['outcome']!r}); nothing to resume")

@@ -47,10 +47,11 @@ from fdem.geometry.joint_sets import SegmentSet
 from fdem.geometry.section import Geometry
 from fdem.geometry.polygons import simple_slope
 from fdem.io.jsonable import write_json
+from fdem.io.messages import say
 
 __all__ = ["NAME", "MULIASHI_SPACING_RULES", "muliashi_geometry", "ZBAR", "BRIDGE_COHESION", "bridge_cohesion",
            "property_sets", "GROUND_TAG_OFFSET", "ground_tags", "build", "meso_views", "build_simulation", "run_one", "main", "YOUNG", "POISSON", "DENSITY", "UCS",
-           "JOINT_COHESION", "JOINT_FRICTION"]
+           "JOINT_COHESION", "JOINT_FRICTION", "SEARCH_CHECKPOINT"]
 
 
 NAME = "muliashi"
@@ -399,6 +400,28 @@ def build_simulation(size: float, spacing_rule: str = "pitch", above_toe: bool =
     return build(size, spacing_rule, above_toe, progress=False)[1]
 
 
+SEARCH_CHECKPOINT = "search_checkpoint.npz"
+"""The gravity-factor search's own checkpoint in a run's folder (its trials, then its result)."""
+
+
+def _search_journal(sim, args, out: Path):
+    """The search's journal: resumed from ``SEARCH_CHECKPOINT`` (loaded into the search's
+    simulation, which is the start state every trial restarts from) when ``--resume`` finds one,
+    else a new one writing it."""
+    from fdem.workflow.journal import RunJournal
+
+    path = out / SEARCH_CHECKPOINT
+    every = getattr(args, "checkpoint_every", None) or None
+    if getattr(args, "resume", None) is not None and path.is_file():
+        journal = RunJournal.resume_from(sim, path, every)
+        from fdem.workflow.fos import TRIALS_MARK
+
+        done = "done" if "fos" in journal.marks else f"{len(journal.marks.get(TRIALS_MARK, {}).get('trials', []))} trial(s) done"
+        say(f"resumed the gravity-factor search from {path}: {done}")
+        return journal
+    return RunJournal(path, every)
+
+
 def run_one(args, spacing_rule: str, out: Path) -> dict:
     from fdem.geometry.polygons import slope_toe
     from fdem.results.report import RunReport
@@ -424,11 +447,25 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
 
     T = response_time(sim.model)
     if args.gravity_factor is None:
-        # the search is not journaled: a resume repeats it (deterministic, 95 s at 1 m)
-        fos_summary = factor_of_safety(
-            sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
-            workers=args.workers, build=build_simulation,
-            build_args=(args.size, spacing_rule, not args.below_toe)).as_dict()
+        # The search has its own journal (SEARCH_CHECKPOINT, on the search's model, which the
+        # slide's checkpoint cannot hold): each finished trial is kept, then the result, so a
+        # resumed run goes on from its last finished trial, or past a finished search at once.
+        search = _search_journal(sim, args, out)
+        try:
+            fos_summary = search.once("fos", lambda: factor_of_safety(
+                sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
+                workers=args.workers, build=build_simulation,
+                build_args=(args.size, spacing_rule, not args.below_toe), journal=search).as_dict())
+        except KeyboardInterrupt as stop:  # between or in a trial: the finished ones are on disk
+            sim.close()
+            ending = f"interrupted in the gravity-factor search ({stop.args[0] if stop.args else 'Ctrl-C'})"
+            summary = {"case": f"muliashi_{spacing_rule}", "outcome": "interrupted", "ending": ending,
+                       "size_m": args.size, "search_checkpoint": str(out / SEARCH_CHECKPOINT)}
+            write_json(out / "summary.json", summary)
+            print(f"[{spacing_rule}] {ending}; resume with: fdem run muliashi --resume {args.out}")
+            return summary
+        if "search end" not in (why for why, _ in search.writes):
+            search.write(sim, "search end")  # the result on disk: a resume skips the search
         k_fail = fos_summary["bracket"][1] * (1.0 + args.overload)
         print(f"[{spacing_rule}] critical gravity factor {fos_summary['fos']:.3f} (bracket "
               f"{fos_summary['bracket'][0]:.3f}-{fos_summary['bracket'][1]:.3f}, {fos_summary['n_trials']} trials, "

@@ -285,3 +285,62 @@ def test_a_scene_file_run_resumes_from_its_own_copy_bit_identical(uninterrupted,
     assert done.returncode == 0, done.stdout + done.stderr
     assert json.loads((out / "run.json").read_text())["resumed"] == 1
     assert_same_run(uninterrupted, out)
+
+
+def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
+    """The Muliashi case searches the critical gravity factor on its own model before the slide,
+    so its trials cannot live in the slide's checkpoint: they go to search_checkpoint.npz. A run
+    stopped in the fourth trial (SIGTERM reaches a run as KeyboardInterrupt at a whole step) and
+    resumed runs only the trials not finished, and ends with the bracket and the trials (factor,
+    verdict, stage result) of the run never stopped; a second resume of the finished search runs
+    no trial at all. Trials capped at 5 ms of simulated time, so that the eight take seconds."""
+    from fdem.cases import muliashi
+    from fdem.workflow import fos
+
+    scene = ["--size", "1.0", "--max-time", "0.005", "--no-pictures", "--quiet", "--yes", "--threads", "1"]
+    run_trial, calls = fos._run_trial, []
+
+    def counted(*args, **kwargs):
+        calls.append(args[3])  # the trial's factor
+        if stop_at is not None and len(calls) == stop_at:
+            raise KeyboardInterrupt("SIGTERM")
+        return run_trial(*args, **kwargs)
+
+    monkeypatch.setattr(fos, "_run_trial", counted)
+    stop_at = None
+    muliashi.main(scene + ["--out", str(tmp_path / "whole")])
+    whole = json.loads((tmp_path / "whole" / "fos.json").read_text())
+    assert whole["n_trials"] >= 6 and len(calls) == whole["n_trials"]
+
+    calls.clear()
+    stop_at = 4
+    cut = muliashi.main(scene + ["--out", str(tmp_path / "cut")])
+    assert cut["outcome"] == "interrupted" and (tmp_path / "cut" / muliashi.SEARCH_CHECKPOINT).is_file()
+    assert not (tmp_path / "cut" / "fos.json").exists()
+
+    calls.clear()
+    stop_at = None
+    muliashi.main(["--resume", str(tmp_path / "cut")])
+    resumed = json.loads((tmp_path / "cut" / "fos.json").read_text())
+    assert len(calls) == whole["n_trials"] - 3                  # the three finished trials replayed, not rerun
+    assert resumed["bracket"] == whole["bracket"]
+    keep = ("factor", "stable", "reason", "steps", "t_end", "max_displacement")
+    assert [{k: t.get(k) for k in keep} for t in resumed["trials"]] == [{k: t.get(k) for k in keep} for t in whole["trials"]]
+
+    # stopped once the search is done, as the slide begins: the resume runs no trial
+    from fdem.workflow import stages
+
+    run_stage = stages.run_stage
+
+    def stopped_slide(*args, **kwargs):
+        raise KeyboardInterrupt("SIGTERM")
+
+    calls.clear()
+    monkeypatch.setattr(stages, "run_stage", stopped_slide)
+    assert muliashi.main(scene + ["--out", str(tmp_path / "slide")])["outcome"] == "interrupted"
+    assert len(calls) == whole["n_trials"]
+    monkeypatch.setattr(stages, "run_stage", run_stage)
+    calls.clear()
+    done = muliashi.main(["--resume", str(tmp_path / "slide")])
+    assert calls == [] and done["outcome"] == "finished"
+    assert done["critical_gravity_factor"]["bracket"] == whole["bracket"]
