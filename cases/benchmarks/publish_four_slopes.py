@@ -151,6 +151,11 @@ def overview(folder: Path = DOCS) -> list[dict]:
         rate = any(st["name"].startswith("reduction_rate") for st in stages)
         fos = (wf.get("fos") or {}).get("fos")
         ext = s.get("extents_m") or {}
+        modes = (s.get("cracks") or {}).get("by_mode") or {}
+        walls = sum(st.get("wall_seconds", 0.0) for st in stages) + ((wf.get("fos") or {}).get("wall_seconds") or 0.0)
+        argv = list(side.get("argv") or [])
+        if argv and "--crest-length" not in argv and ext:  # begun before run.json pinned the extents
+            argv += [a for k, v in ext.items() for a in ("--" + k.replace("_", "-"), f"{v or 0:g}")]
         rows.append({
             "name": path.stem, "scene": f"{s.get('scene')} ({s.get('joint_offset', 0):g})", "size": s.get("size_m"),
             "triangles": s.get("n_triangles"),
@@ -163,19 +168,35 @@ def overview(folder: Path = DOCS) -> list[dict]:
             "area": run.get("displaced_area_m2"), "area_1m": areas.get("1"), "ke_peak": ke.get("peak_J_per_m"),
             "broken": f"{(tags.get('rock') or {}).get('broken', 0):,} / {(tags.get('joints') or {}).get('broken', 0):,}",
             "law": "faces in touch" if law and law != EARLIER_LAW else ("lowest of six" if law else "-"),
+            "released": ke.get("released_gravity_J_per_m"),
+            "modes": " / ".join(f"{modes.get(m, 0):,}" for m in ("I", "II", "mixed")),
+            "steps": s.get("steps"), "wall": walls,
+            "command": "fdem run four-slopes " + " ".join(
+                a for i, a in enumerate(argv) if a not in ("--quiet", "--yes", "--out") and not (i and argv[i - 1] == "--out")),
+            "commit": ((side.get("source") or {}).get("commit") or "")[:7],
         })
     return rows
 
 
 def print_overview(rows: list[dict]) -> None:
+    """The table, then the command of each row (its options as ``run.json`` pinned them; the
+    output folder left out) and the commit it ran at."""
     print("| run (docs/cases/rest) | scene (joint offset) | size | triangles | crest / floor / band [m] | schedule | "
-          "state | max displacement | runout | area moved > 0.1 m / > 1 m | KE peak | broken rock / joints | contact |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "state | max displacement | runout | area moved > 0.1 m / > 1 m | KE peak | gravity released | "
+          "broken rock / joints | broken I / II / mixed | steps | wall (1 CPU thread) | contact |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
+        released = "-" if r["released"] is None else f"{r['released'] / 1e6:.3g} MJ/m"
         print(f"| {r['name']} | {r['scene']} | {r['size']} m | {r['triangles']:,} | {r['extents']} | {r['schedule']} | "
               f"{r['state']} | {r['max_displacement']:.3g} m | {r['runout']:.3g} m | {r['area']:.3g} / "
               f"{'-' if r['area_1m'] is None else format(r['area_1m'], '.3g')} m^2 | "
-              f"{r['ke_peak'] / 1e6:.3g} MJ/m | {r['broken']} | {r['law']} |")
+              f"{r['ke_peak'] / 1e6:.3g} MJ/m | {released} | {r['broken']} | {r['modes']} | "
+              f"{'-' if r['steps'] is None else format(r['steps'], ',')} | {r['wall']:,.0f} s | {r['law']} |")
+    print()
+    print("The command of each row (`--out` left out; `--resume` carries a stopped one on), at the commit named:")
+    print()
+    for r in rows:
+        print(f"    {r['name']}: {r['command'] or '-'}" + (f"    # {r['commit']}" if r['commit'] else ""))
 
 
 def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
