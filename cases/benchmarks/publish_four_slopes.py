@@ -170,7 +170,7 @@ def overview(folder: Path = DOCS) -> list[dict]:
             "law": "faces in touch" if law and law != EARLIER_LAW else ("lowest of six" if law else "-"),
             "released": ke.get("released_gravity_J_per_m"),
             "modes": " / ".join(f"{modes.get(m, 0):,}" for m in ("I", "II", "mixed")),
-            "steps": s.get("steps"), "wall": walls,
+            "steps": s.get("steps"), "wall": f"{walls:,.0f} s" + (" (finished stages)" if stopped else ""),
             "command": "fdem run four-slopes " + " ".join(
                 a for i, a in enumerate(argv) if a not in ("--quiet", "--yes", "--out") and not (i and argv[i - 1] == "--out")),
             "commit": ((side.get("source") or {}).get("commit") or "")[:7],
@@ -191,7 +191,7 @@ def print_overview(rows: list[dict]) -> None:
               f"{r['state']} | {r['max_displacement']:.3g} m | {r['runout']:.3g} m | {r['area']:.3g} / "
               f"{'-' if r['area_1m'] is None else format(r['area_1m'], '.3g')} m^2 | "
               f"{r['ke_peak'] / 1e6:.3g} MJ/m | {released} | {r['broken']} | {r['modes']} | "
-              f"{'-' if r['steps'] is None else format(r['steps'], ',')} | {r['wall']:,.0f} s | {r['law']} |")
+              f"{'-' if r['steps'] is None else format(r['steps'], ',')} | {r['wall']} | {r['law']} |")
     print()
     print("The command of each row (`--out` left out; `--resume` carries a stopped one on), at the commit named:")
     print()
