@@ -17,9 +17,9 @@ Numba. Both sides are checkpointed and resumed by the other backend:
 
 Every comparison is against the CPU run that was never interrupted. Breakage (which elements,
 at which step), the contact pairs and which of them touch must be equal; the floating values
-agree to round-off: the CPU kernels run with fastmath (reassociation, fused multiply-adds), the
-simulator in plain Python, and the GPU adds crack forces and block sums with atomics in another
-order. Measured (steps 50-62, 8 elements broken, 96 pairs touching): positions 1e-16 m,
+agree to round-off: the CPU kernels run with fastmath (fused multiply-adds; the crack kernels
+also reassociate), the simulator in plain Python, and the GPU adds crack forces and block sums
+with atomics in another order. Measured (steps 50-62, 8 elements broken, 96 pairs touching): positions 1e-16 m,
 velocities 4e-12 m/s (of 3.2 m/s), damage 2e-13, the friction springs 2e-11 and the ledger's
 terms 7e-13 of their largest value; over a 120-step run from the start (``python
 tests/unit/cuda_scene.py``, 24 broken): 2e-14 m and 9e-10 m/s. The tolerances below are about

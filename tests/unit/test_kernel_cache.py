@@ -73,12 +73,44 @@ print(json.dumps({"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
 """
 
 
-def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bits(tmp_path):
-    """A heap of 1,800 free triangles under gravity, 400 damped steps with contact on one thread,
-    run twice against an empty Numba cache: the first run compiles the kernels, the second loads
-    them. The two end states must agree to the bit, or a resumed run (which loads) is not the run
-    it resumes (which compiled). With the fast-math flag ``reassoc`` beside ``contract`` (the
-    flags before 2026-11-25) the two parted in both the triangle and the contact-pair kernels."""
+_BREAKING_BLOCK = """
+import hashlib, json
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from fdem.kernels import contact_pairs, cracks as crack_kernels, stepping, triangles
+from fdem.mesh.mesh import structured_rectangle
+from fdem.mesh.topology import build_topology
+from fdem.physics.contact import ContactSet
+from fdem.physics.cracks import CrackProperties, CrackSet
+from fdem.physics.elastic import ElasticMaterial
+from fdem.solve.model import Model
+from fdem.solve.simulation import Simulation
+
+topo = build_topology(structured_rectangle(16, 16, 4.0, 4.0))
+model = Model(topo, ElasticMaterial(0.59e9, 0.29, 2680.0))
+rng = np.random.default_rng(7)
+model.initial_velocity[:] = rng.standard_normal(model.initial_velocity.shape) * 0.3   # m/s
+# weak rock: the random velocity field opens and shears crack elements past their strength,
+# so they soften (mode I, II, mixed) and break, and the broken faces come into contact
+cracks = CrackSet(topo, {0: CrackProperties(f_t=2e4, c=4e4, phi=30.0, G_I=5.0, G_II=20.0, p_n=5.9e9)})
+contact = ContactSet(topo, 5.9e9, friction_angle=30.0, mass=model.node_mass(), cracks=cracks)
+sim = Simulation(model, providers=[cracks, contact], progress=False)
+sim.monitors.clear()
+for _ in range(300):
+    sim.step()
+kernels = [k for m in (contact_pairs, crack_kernels, stepping, triangles) for k in vars(m).values()
+           if isinstance(k, CPUDispatcher)]
+print(json.dumps({"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
+                  "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest(),
+                  "broken": int(np.count_nonzero(cracks.broken)),
+                  "inelastic": int(len(cracks.inelastic())),
+                  "hits": sum(sum(k.stats.cache_hits.values()) for k in kernels),
+                  "misses": sum(sum(k.stats.cache_misses.values()) for k in kernels)}))
+"""
+
+
+def _fresh_then_cached(tmp_path, script):
+    """The script run twice against an empty Numba cache on one thread: (compiled, loaded)."""
     import json
     import os
     import subprocess
@@ -87,10 +119,30 @@ def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bit
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"), NUMBA_NUM_THREADS="1")
     runs = []
     for _ in range(2):
-        out = subprocess.run([sys.executable, "-c", _FRAGMENTED_BLOCK], env=env, capture_output=True, text=True,
+        out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
                              check=True, timeout=600)
         runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
     fresh, cached = runs
     assert fresh["misses"] > 0 and fresh["hits"] == 0, fresh      # compiled in the run
     assert cached["hits"] > 0 and cached["misses"] == 0, cached    # every kernel loaded from the cache
+    return fresh, cached
+
+
+def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bits(tmp_path):
+    """A heap of 1,800 free triangles under gravity, 400 damped steps with contact on one thread,
+    run twice against an empty Numba cache: the first run compiles the kernels, the second loads
+    them. The two end states must agree to the bit, or a resumed run (which loads) is not the run
+    it resumes (which compiled). With the fast-math flag ``reassoc`` beside ``contract`` (the
+    flags before 2026-11-25) the two parted in both the triangle and the contact-pair kernels."""
+    fresh, cached = _fresh_then_cached(tmp_path, _FRAGMENTED_BLOCK)
     assert (cached["x"], cached["v"]) == (fresh["x"], fresh["v"])
+
+
+def test_crack_kernels_compiled_and_loaded_give_the_same_bits(tmp_path):
+    """The same for the crack-element kernels (cohesive law, softening, breakage) with contact
+    between broken faces: a bonded block of 512 triangles shaken apart by a random velocity
+    field, 300 steps on one thread. Fresh and cached runs must agree to the bit, softened and
+    broken elements included (the scene must break some, or the law's branches go untested)."""
+    fresh, cached = _fresh_then_cached(tmp_path, _BREAKING_BLOCK)
+    assert fresh["broken"] > 10 and fresh["inelastic"] > fresh["broken"], fresh
+    assert (cached["x"], cached["v"], cached["broken"]) == (fresh["x"], fresh["v"], fresh["broken"])
