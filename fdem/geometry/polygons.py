@@ -224,7 +224,7 @@ def ground_surface(slope):
     """``y_s(x)``: the top of a slope profile (the polygon's vertices above its base, left to
     right, linearly interpolated), for a geostatic stress or the cover depth ``y_s(x) - y``."""
     v = slope.vertices
-    x0, _, x1, _ = slope.bounds
-    top = v[(v[:, 1] > 0) & ~(((v[:, 0] == x0) | (v[:, 0] == x1)) & (v[:, 1] == 0))]
+    base = slope.bounds[1]
+    top = v[v[:, 1] > base]
     top = top[np.argsort(top[:, 0], kind="stable")]
     return lambda x: np.interp(x, top[:, 0], top[:, 1])

@@ -453,9 +453,10 @@ def start_against_strength(cracks, slope, factor: float) -> dict:
     left). An element is over strength when an end's traction exceeds Mohr-Coulomb with the
     tension cut-off (:func:`fdem.solve.geostatic.crack_strength_check` at ``factor``). The level
     ground is where the element's midpoint lies more than one slope height ``H`` in front of the
-    toe or behind the crest; its cover is the depth below the ground surface (the shallowest
-    reported among elements at least half the median element length: slivers at joint crossings
-    carry noisy end tractions). Under level ground
+    toe or behind the crest; an element's cover is the depth of its deeper end below the ground
+    surface, where its traction is the larger (the shallowest such cover is reported among
+    elements at least half the median element length: slivers at joint crossings carry noisy
+    end tractions). Under level ground
     in uniaxial strain a plane is over strength below a depth ``z*`` that
     :func:`fdem.reference.level_ground.slip_depth` gives in closed form.
 
@@ -476,7 +477,9 @@ def start_against_strength(cracks, slope, factor: float) -> dict:
     crest_x, crest_y = slope_crest(slope)
     height = crest_y - toe_y
     level = (mid[:, 0] < toe_x - height) | (mid[:, 0] > crest_x + height)
-    cover = ground_surface(slope)(mid[:, 0]) - mid[:, 1]
+    ends = np.asarray(topo.x0, float)[np.asarray(topo.crack_nodes)[:, :2]]   # the two ends of one face
+    surface = ground_surface(slope)
+    cover = np.maximum(*(surface(ends[:, k, 0]) - ends[:, k, 1] for k in (0, 1)))
     joints = np.asarray(topo.crack_tag) > 0
     length = np.asarray(topo.crack_length0, float)
     whole = length >= 0.5 * np.median(length)  # a sliver's end tractions are discretization noise
