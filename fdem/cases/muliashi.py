@@ -451,6 +451,9 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
         # slide's checkpoint cannot hold): each finished trial is kept, then the result, so a
         # resumed run goes on from its last finished trial, or past a finished search at once.
         search = _search_journal(sim, args, out)
+        searched = "fos" in search.marks   # a resume past a finished search: its result is on disk
+        if not (out / SEARCH_CHECKPOINT).is_file():
+            search.write(sim, "search start")   # so that a stop in the first trial can be resumed too
         try:
             fos_summary = search.once("fos", lambda: factor_of_safety(
                 sim, lower=1.0, upper=args.upper, tol=args.tol, trigger=GravityIncrease(), out_dir=out,
@@ -464,7 +467,7 @@ def run_one(args, spacing_rule: str, out: Path) -> dict:
             write_json(out / "summary.json", summary)
             print(f"[{spacing_rule}] {ending}; resume with: fdem run muliashi --resume {args.out}")
             return summary
-        if "search end" not in (why for why, _ in search.writes):
+        if not searched:
             search.write(sim, "search end")  # the result on disk: a resume skips the search
         k_fail = fos_summary["bracket"][1] * (1.0 + args.overload)
         print(f"[{spacing_rule}] critical gravity factor {fos_summary['fos']:.3f} (bracket "

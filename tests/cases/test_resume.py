@@ -327,6 +327,18 @@ def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_fini
     keep = ("factor", "stable", "reason", "steps", "t_end", "max_displacement")
     assert [{k: t.get(k) for k in keep} for t in resumed["trials"]] == [{k: t.get(k) for k in keep} for t in whole["trials"]]
 
+    # stopped in the first trial, before any trial finished: the search's start is on disk, so
+    # the run resumes too (and runs every trial)
+    calls.clear()
+    stop_at = 1
+    first = muliashi.main(scene + ["--out", str(tmp_path / "first")])
+    assert first["outcome"] == "interrupted" and (tmp_path / "first" / muliashi.SEARCH_CHECKPOINT).is_file()
+    calls.clear()
+    stop_at = None
+    muliashi.main(["--resume", str(tmp_path / "first")])
+    assert len(calls) == whole["n_trials"]
+    assert json.loads((tmp_path / "first" / "fos.json").read_text())["bracket"] == whole["bracket"]
+
     # stopped once the search is done, as the slide begins: the resume runs no trial
     from fdem.workflow import stages
 
@@ -341,6 +353,8 @@ def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_fini
     assert len(calls) == whole["n_trials"]
     monkeypatch.setattr(stages, "run_stage", run_stage)
     calls.clear()
+    searched = (tmp_path / "slide" / muliashi.SEARCH_CHECKPOINT).stat().st_mtime_ns
     done = muliashi.main(["--resume", str(tmp_path / "slide")])
     assert calls == [] and done["outcome"] == "finished"
+    assert (tmp_path / "slide" / muliashi.SEARCH_CHECKPOINT).stat().st_mtime_ns == searched  # not written again
     assert done["critical_gravity_factor"]["bracket"] == whole["bracket"]
