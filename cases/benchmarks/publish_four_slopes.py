@@ -154,8 +154,9 @@ def overview(folder: Path = DOCS) -> list[dict]:
         modes = (s.get("cracks") or {}).get("by_mode") or {}
         walls = sum(st.get("wall_seconds", 0.0) for st in stages) + ((wf.get("fos") or {}).get("wall_seconds") or 0.0)
         argv = list(side.get("argv") or [])
-        if argv and "--crest-length" not in argv and ext:  # begun before run.json pinned the extents
-            argv += [a for k, v in ext.items() for a in ("--" + k.replace("_", "-"), f"{v or 0:g}")]
+        if argv and ext:  # begun before run.json pinned the extents: add each one its argv lacks
+            argv += [a for k, v in ext.items() if "--" + k.replace("_", "-") not in argv
+                     for a in ("--" + k.replace("_", "-"), f"{v or 0:g}")]
         rows.append({
             "name": path.stem, "scene": f"{s.get('scene')} ({s.get('joint_offset', 0):g})", "size": s.get("size_m"),
             "triangles": s.get("n_triangles"),
