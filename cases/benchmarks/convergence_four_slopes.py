@@ -114,10 +114,14 @@ def row(summary: dict) -> dict:
 
 
 def table(root: Path) -> list[dict]:
+    """The rows of the runs under ``root``: every finished run, and a run stopped after its
+    bisection ended (its factor of safety is a result; the outcome column says it stopped, and
+    its steps bracket holds the stages it finished)."""
     rows = []
     for path in sorted(root.glob("*/summary.json")):
         s = json.loads(path.read_text())
-        if s.get("case") == "four-slopes" and s.get("workflow") and finished(path.parent):
+        searched = ((s.get("workflow") or {}).get("fos") or {}).get("fos") is not None
+        if s.get("case") == "four-slopes" and s.get("workflow") and (finished(path.parent) or searched):
             rows.append({**row(s), "folder": str(path.parent)})
     rows.sort(key=lambda r: (r["scene"] or "", r["joint_offset"] or 0.0, -(r["size_m"] or 0)))
     return rows
