@@ -1,5 +1,7 @@
 """The kernel cache is dropped when any kernel source changes (fdem/_kernel_cache.py): Numba's
 own check looks only at the file of the function it loads, not at helpers in other files."""
+import pytest
+
 from fdem.kernels.cache import STAMP, kernel_sources_digest, refresh_kernel_cache
 
 
@@ -65,26 +67,15 @@ sim = Simulation(model, providers=[contact], progress=False)
 sim.monitors.clear()
 for _ in range(400):
     sim.step(Damping(mass_proportional=50.0))
-kernels = [k for m in (contact_pairs, stepping, triangles) for k in vars(m).values() if isinstance(k, CPUDispatcher)]
-print(json.dumps({"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
-                  "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest(),
-                  "hits": sum(sum(k.stats.cache_hits.values()) for k in kernels),
-                  "misses": sum(sum(k.stats.cache_misses.values()) for k in kernels)}))
+results = {"heap": {"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
+                    "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest()}}
 """
 
 
 _BREAKING_BLOCK = """
-import hashlib, json
-import numpy as np
-from numba.core.registry import CPUDispatcher
-from fdem.kernels import contact_pairs, cracks as crack_kernels, stepping, triangles
-from fdem.mesh.mesh import structured_rectangle
+from fdem.kernels import cracks as crack_kernels
 from fdem.mesh.topology import build_topology
-from fdem.physics.contact import ContactSet
 from fdem.physics.cracks import CrackProperties, CrackSet
-from fdem.physics.elastic import ElasticMaterial
-from fdem.solve.model import Model
-from fdem.solve.simulation import Simulation
 
 topo = build_topology(structured_rectangle(16, 16, 4.0, 4.0))
 model = Model(topo, ElasticMaterial(0.59e9, 0.29, 2680.0))
@@ -98,25 +89,29 @@ sim = Simulation(model, providers=[cracks, contact], progress=False)
 sim.monitors.clear()
 for _ in range(300):
     sim.step()
+results["block"] = {"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
+                    "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest(),
+                    "broken": int(np.count_nonzero(cracks.broken)), "inelastic": int(len(cracks.inelastic()))}
 kernels = [k for m in (contact_pairs, crack_kernels, stepping, triangles) for k in vars(m).values()
            if isinstance(k, CPUDispatcher)]
-print(json.dumps({"x": hashlib.sha1(sim.state.x.tobytes()).hexdigest(),
-                  "v": hashlib.sha1(sim.state.v.tobytes()).hexdigest(),
-                  "broken": int(np.count_nonzero(cracks.broken)),
-                  "inelastic": int(len(cracks.inelastic())),
-                  "hits": sum(sum(k.stats.cache_hits.values()) for k in kernels),
-                  "misses": sum(sum(k.stats.cache_misses.values()) for k in kernels)}))
+results["hits"] = sum(sum(k.stats.cache_hits.values()) for k in kernels)
+results["misses"] = sum(sum(k.stats.cache_misses.values()) for k in kernels)
+print(json.dumps(results))
 """
 
 
-def _fresh_then_cached(tmp_path, script):
-    """The script run twice against an empty Numba cache on one thread: (compiled, loaded)."""
+@pytest.fixture(scope="module")
+def fresh_and_cached(tmp_path_factory):
+    """Both scenes (the heap, then the breaking block) in one script, run twice against an empty
+    Numba cache on one thread: (compiled, loaded). One script, so that each process compiles the
+    shared triangle and contact kernels once."""
     import json
     import os
     import subprocess
     import sys
 
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"), NUMBA_NUM_THREADS="1")
+    script = _FRAGMENTED_BLOCK + _BREAKING_BLOCK
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path_factory.mktemp("numba_cache")), NUMBA_NUM_THREADS="1")
     runs = []
     for _ in range(2):
         out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
@@ -128,21 +123,21 @@ def _fresh_then_cached(tmp_path, script):
     return fresh, cached
 
 
-def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bits(tmp_path):
+def test_kernels_compiled_in_the_run_and_loaded_from_the_cache_give_the_same_bits(fresh_and_cached):
     """A heap of 1,800 free triangles under gravity, 400 damped steps with contact on one thread,
     run twice against an empty Numba cache: the first run compiles the kernels, the second loads
     them. The two end states must agree to the bit, or a resumed run (which loads) is not the run
     it resumes (which compiled). With the fast-math flag ``reassoc`` beside ``contract`` (the
     flags before 2026-11-25) the two parted in both the triangle and the contact-pair kernels."""
-    fresh, cached = _fresh_then_cached(tmp_path, _FRAGMENTED_BLOCK)
+    fresh, cached = (run["heap"] for run in fresh_and_cached)
     assert (cached["x"], cached["v"]) == (fresh["x"], fresh["v"])
 
 
-def test_crack_kernels_compiled_and_loaded_give_the_same_bits(tmp_path):
+def test_crack_kernels_compiled_and_loaded_give_the_same_bits(fresh_and_cached):
     """The same for the crack-element kernels (cohesive law, softening, breakage) with contact
     between broken faces: a bonded block of 512 triangles shaken apart by a random velocity
     field, 300 steps on one thread. Fresh and cached runs must agree to the bit, softened and
     broken elements included (the scene must break some, or the law's branches go untested)."""
-    fresh, cached = _fresh_then_cached(tmp_path, _BREAKING_BLOCK)
+    fresh, cached = (run["block"] for run in fresh_and_cached)
     assert fresh["broken"] > 10 and fresh["inelastic"] > fresh["broken"], fresh
     assert (cached["x"], cached["v"], cached["broken"]) == (fresh["x"], fresh["v"], fresh["broken"])
