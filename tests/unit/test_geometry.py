@@ -7,7 +7,7 @@ import pytest
 
 from fdem.geometry.joint_sets import BrickSet, IntermittentSet, PersistentSet, SegmentSet, StochasticSet
 from fdem.geometry.section import Geometry
-from fdem.geometry.polygons import Polygon, benched_slope, rectangle, simple_slope
+from fdem.geometry.polygons import Polygon, benched_slope, ground_surface, rectangle, simple_slope
 from fdem.geometry.dfn import merge_collinear, split_at_crossings
 
 
@@ -19,6 +19,18 @@ def test_simple_slope_shape_and_area():
     # Rectangle minus the triangle above the face and the block above the toe floor.
     expected = 90 * 30 - 45 * 15 - 0.5 * 15 * 15
     assert s.area == pytest.approx(expected, rel=1e-14)
+
+
+def test_ground_surface_is_the_top_of_the_profile_wherever_the_base_lies():
+    """y_s(x) of a 15 m, 45 deg slope (toe at x = 45 m, 15 m above the base, crest from x = 60 m):
+    the floor, the face and the crest, linearly; the same profile moved 100 m down (a base below
+    y = 0, as a scene file may place it) gives the same surface moved 100 m down."""
+    s = simple_slope(15.0, 45.0, crest_length=30, toe_length=45, base_depth=15)
+    x = np.array([0.0, 20.0, 45.0, 52.5, 60.0, 75.0, 90.0])
+    top = np.array([15.0, 15.0, 15.0, 22.5, 30.0, 30.0, 30.0])
+    np.testing.assert_allclose(ground_surface(s)(x), top, atol=1e-12)
+    lowered = Polygon(s.vertices - np.array([0.0, 100.0]), "lowered")
+    np.testing.assert_allclose(ground_surface(lowered)(x), top - 100.0, atol=1e-12)
 
 
 def test_benched_slope_area():
