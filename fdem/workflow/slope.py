@@ -23,7 +23,8 @@ Every stage's result (why it ended, when, how many steps) goes into the returned
 every ending is one of its outcomes: ``stable``, ``failed``, ``crept`` (a reduction stage did not
 settle, but the undamped stage after it came to rest after less than the failure displacement:
 the slope crept and stopped; in steps, the reduction then carries on from the resting state,
-and a later factor may still fail), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
+and a later factor may still fail), ``undecided`` (such a stage whose runout was capped before
+it came to rest or moved the failure displacement), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
 step: the reason, and the last good state to resume from with a smaller step). With a
 :class:`~fdem.workflow.journal.RunJournal` the run writes resumable checkpoints and a resumed
 run replays the workflow to where it stopped (:mod:`fdem.workflow.journal`).
@@ -346,8 +347,13 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     the factor (``crept_at_factors`` every such factor, when the reduction steps carried on from
     the resting state), ``failed_at_factor`` goes back to None, and the reduction-step bracket
     reads it as a factor the slope stands at (:func:`factor_of_safety_figures`). The creep is
-    bounded by the sum of the two stages' largest node displacements."""
-    if runout.reason != "converged" or len(summary["stages"]) < 2:
+    bounded by the sum of the two stages' largest node displacements.
+
+    A runout cut short by its cap (``--runout-time``) before it came to rest, with less than the
+    failure displacement moved, has not told a creep from a collapse: its outcome is
+    ``undecided`` (``failed_at_factor`` kept: the factor at which the slope did not settle),
+    with an ending that says so and how to decide it."""
+    if runout.reason not in ("converged", "capped") or len(summary["stages"]) < 2:
         return
     failing = summary["stages"][-2]
     if failing.get("reason") == "failed":  # the failing stage itself saw a node move the failure displacement
@@ -356,6 +362,12 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     if creep >= fail_displacement:
         return
     factor = summary["failed_at_factor"]
+    if runout.reason == "capped":
+        summary["outcome"] = "undecided"
+        summary["ending"] = (f"did not settle at F = {factor:.4g}, and the runout was capped at t = {runout.t_end:.4g} s "
+                             f"after {creep:.3g} m, less than the failure displacement ({fail_displacement:.3g} m): "
+                             f"failed or crept is undecided; rerun without a runout cap to follow it to rest")
+        return
     summary["outcome"] = "crept"
     summary["crept_at_factor"] = factor
     summary.setdefault("crept_at_factors", []).append(factor)

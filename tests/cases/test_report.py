@@ -31,7 +31,11 @@ def test_run_report_after_failure_and_runout(tmp_path):
     toe_x, _ = slope_toe(g.bodies[0])
     report = RunReport(sim, toe_x=toe_x)
     T = response_time(sim.model)
-    summary = run_slope_workflow(sim, SlopeWorkflow(factors=(1.6, 3.0), step_time=8 * T, runout_time=0.4))
+    # a short runout (0.4 s) decides "failed" once the block has moved the failure displacement,
+    # here 2 cm (by default 1 % of the height, 15 cm: the block has slid 8.6 cm when the cap comes,
+    # and the outcome would be "undecided")
+    summary = run_slope_workflow(sim, SlopeWorkflow(factors=(1.6, 3.0), step_time=8 * T, runout_time=0.4,
+                                                    fail_displacement=0.02))
     sim.close()
     out = report.write(tmp_path, extra={"workflow": summary})
     assert summary["outcome"] == "failed"
