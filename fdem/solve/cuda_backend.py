@@ -59,10 +59,23 @@ class BackendError(RuntimeError):
     """The backend asked for cannot run here (no GPU, numba-cuda missing, a CPU-only feature)."""
 
 
+def _numpy_aliases_for_numba_cuda() -> None:
+    """Give NumPy back the names that numba-cuda registers at its first kernel compilation.
+
+    numba-cuda 0.30 registers an overload for ``np.row_stack``, which NumPy 2.5 removed (it was
+    an alias of ``np.vstack`` since NumPy 1.0); with that pair the first GPU compilation fails
+    with ``AttributeError: module 'numpy' has no attribute 'row_stack'``. Seen on an H100 node
+    with numpy 2.5.2 and numba-cuda 0.30.4 (docs/gpu.md). The alias is restored only where it is
+    missing, and to the function it always stood for."""
+    if not hasattr(np, "row_stack"):
+        np.row_stack = np.vstack
+
+
 def require_cuda():
     """The ``numba.cuda`` module, or :class:`BackendError` saying what is missing.
 
     Checked before any work: a run that asks for the GPU on a machine without one stops at once."""
+    _numpy_aliases_for_numba_cuda()
     try:
         from numba import cuda
     except ImportError as exc:  # numba without the CUDA target

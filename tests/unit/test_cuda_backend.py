@@ -170,3 +170,15 @@ def test_cuda_without_a_gpu_stops_before_any_work():
         pytest.skip("this machine has a GPU")
     with pytest.raises(BackendError, match="needs an NVIDIA GPU"):
         cuda_scene.build("cuda")
+
+
+def test_numpy_without_row_stack_gets_it_back_for_numba_cuda(monkeypatch):
+    """numba-cuda 0.30 overloads ``np.row_stack``, which NumPy 2.5 removed: on such a node the
+    first GPU compilation failed (seen on an H100, numpy 2.5.2, numba-cuda 0.30.4). The backend
+    restores the name, as the function it always stood for."""
+    from fdem.solve.cuda_backend import _numpy_aliases_for_numba_cuda
+
+    monkeypatch.delattr(np, "row_stack", raising=False)
+    assert "row_stack" not in vars(np)
+    _numpy_aliases_for_numba_cuda()
+    assert np.row_stack is np.vstack
