@@ -7,7 +7,8 @@
 #                                               # the fragmented figure; the paper-scale four
 #                                               # slopes on the GPU for SECONDS of wall time
 #
-# The node needs numpy, scipy, numba and numba-cuda only (docs/gpu.md): the scene is meshed
+# The node needs numpy, scipy, numba and numba-cuda (docs/gpu.md; pytest too, for the check's
+# comparison, which uses the test's own tolerances): the scene is meshed
 # elsewhere (`fdem run four-slopes --size 0.18 --max-steps 0` writes the .npz, `--write-scene`
 # the .toml). Logs and the figures' JSON go to $OUT (default runs/gpu_lease); each stage has its
 # own wall-clock limit and is interrupted with SIGINT, so a stage that runs long still leaves its
@@ -50,6 +51,7 @@ t.assert_same_run(a, b)
 print('GPU equals CPU over 120 steps within the test tolerances')\""
     stage intact 150 $py cases/benchmarks/bench_gpu.py intact --triangles 1000000 --seconds 1 --repeats 3
     cp docs/benchmarks/gpu_intact.json "$OUT/" 2>/dev/null
+    # bench_gpu.py writes docs/benchmarks/gpu_intact.json: the batched figure is kept in $OUT above
     stage intact_single 60 $py cases/benchmarks/bench_gpu.py intact --triangles 1000000 --seconds 1 --repeats 2 --max-batch 1
     cp docs/benchmarks/gpu_intact.json "$OUT/gpu_intact_single.json" 2>/dev/null
     ;;

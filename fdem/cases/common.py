@@ -453,6 +453,16 @@ def start_journal(sim, args, folder=None):
     return RunJournal(path, every)
 
 
+def failing_factor_words(summary: dict) -> str:
+    """``", failed at F = 1.430"`` for the result line of a slope case; an ``undecided`` run (its
+    stage at F did not settle and its runout was capped before it told a creep from a collapse)
+    says ``", did not settle at F = 1.430"``; nothing when no factor failed."""
+    F = summary.get("failed_at_factor")
+    if not F:
+        return ""
+    return f", {'did not settle' if summary.get('outcome') == 'undecided' else 'failed'} at F = {F:.3f}"
+
+
 def exit_code(summary) -> int:
     """The command's exit code for a case's summary: 130 / 143 interrupted by SIGINT / SIGTERM,
     1 unstable (or any outcome ``error``), 0 otherwise (the run finished, whatever the slope did)."""

@@ -42,7 +42,7 @@ import numpy as np
 from fdem.cases.common import (add_resume_options, add_write_scene_option, cap_simulated_time, case_parser, check_common, check_mesh_size,
                                finish_run, prepare_run, report_runout_cost,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling, write_case_scene, write_report)
+                               use_density_scaling, write_case_scene, write_report, failing_factor_words)
 
 __all__ = ["NAME", "PENALTY", "GRAVITY", "ELEMENT_DAMPING", "CONTACT_DAMPING", "SIZE", "MIN_JOINT_LENGTH",
            "FOS_BRACKET", "geometry", "property_sets", "build", "scene", "main", "HEIGHT", "FACE_ANGLE", "TOE_LENGTH", "CREST_LENGTH", "BASE_DEPTH", "JOINT_DIP", "JOINT_SPACING", "YOUNG", "POISSON", "DENSITY"]
@@ -207,7 +207,7 @@ def main(argv=None) -> dict:
     print(f"outcome {summary['outcome']}"
           + (f", factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "
              f"{summary['fos_bracket'][1]:.3f}, {summary['fos_method']})" if summary["fos"] is not None else "")
-          + (f", failed at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
+          + failing_factor_words(summary)
           + f"; runout {_fmt(run.get('runout_distance_m'))} m beyond the toe, displaced area "
           f"{_fmt(run.get('displaced_area_m2'))} m^2; {summary['cracks']['broken']} crack elements broken; "
           f"{summary['wall_seconds']:.0f} s")

@@ -25,7 +25,7 @@ from pathlib import Path
 from fdem.cases.common import (_option_names, add_resume_options, cap_simulated_time, case_parser, check_common,
                                check_mesh_size, finish_run, open_run, prepare_run, report_runout_cost, set_threads,
                                start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
-                               use_density_scaling, write_report)
+                               use_density_scaling, write_report, failing_factor_words)
 from fdem.io.jsonable import write_json
 
 __all__ = ["NAME", "SCENE_COPY", "main", "run_scene"]
@@ -235,7 +235,7 @@ def run_scene(parser, args, scene: dict) -> dict:
         print(f"outcome {summary['outcome']}"
               + (f", {what} between {lo:.3f} and {hi:.3f}" if lo is not None and hi is not None else
                  f", stable up to F = {lo:.3f}" if lo is not None else "")
-              + (f", failed at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
+              + failing_factor_words(summary)
               + f"; {summary['cracks']['broken']} crack elements broken; {summary['wall_seconds']:.0f} s")
         say(f"wrote {out / 'summary.json'}, {out / 'slope.pvd'}")
     return summary

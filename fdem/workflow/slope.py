@@ -338,6 +338,8 @@ def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> N
         summary["ending"] = (f"the failed mass ran off the end of the model at t = {runout.t_end:.4g} s ({runout.detail}): "
                              f"the runout distance is a lower bound; lengthen the floor in front of the toe")
     _tell_creep(summary, runout, fail.displacement)
+    if summary["outcome"] == "undecided" and sim.time_capped:  # the run's own cap (--max-time) ended it
+        summary["outcome"] = "time_capped"
 
 
 def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
@@ -366,7 +368,8 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
         summary["outcome"] = "undecided"
         summary["ending"] = (f"did not settle at F = {factor:.4g}, and the runout was capped at t = {runout.t_end:.4g} s "
                              f"after {creep:.3g} m, less than the failure displacement ({fail_displacement:.3g} m): "
-                             f"failed or crept is undecided; rerun without a runout cap to follow it to rest")
+                             f"failed or crept is undecided; rerun with a longer runout cap (--runout-time) to follow "
+                             f"it to rest")
         return
     summary["outcome"] = "crept"
     summary["crept_at_factor"] = factor

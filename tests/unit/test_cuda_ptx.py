@@ -65,7 +65,9 @@ def kernels():
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=(9, 0))
     try:
         from fdem.kernels import cuda_search, cuda_step
+        from fdem.solve.cuda_backend import _numpy_aliases_for_numba_cuda
 
+        _numpy_aliases_for_numba_cuda()  # what the backend does before any GPU work (NumPy 2.5)
         yield {**{n: getattr(cuda_step, n) for n in SIGNATURES}, **{n: getattr(cuda_search, n) for n in SEARCH_SIGNATURES}}
     finally:
         dispatcher.get_current_device = real

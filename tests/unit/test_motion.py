@@ -159,7 +159,7 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
         assert fos["fos_bracket"] == [1.667, 2.0]   # not settled at 2.0: the bracket's upper end
     if outcome == "undecided":
         assert summary["failed_at_factor"] == 2.0 and "undecided" in summary["ending"]
-        assert "0.036 m" in summary["ending"] and "without a runout cap" in summary["ending"]
+        assert "0.036 m" in summary["ending"] and "longer runout cap" in summary["ending"]
 
 
 @pytest.mark.parametrize("script, outcome, bracket, names", [
@@ -173,6 +173,9 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
       "reduction_F2.000": ("capped", 0.03), "runout_F2.000": ("converged", 0.002)},
      "crept", [2.0, None], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout", "reduction_F2.000",
                             "runout_F2.000"]),
+    # does not settle at 1.5 and its runout is capped still moving: undecided, no carrying on
+    ({"reduction_F1.500": ("capped", 0.03), "runout": ("capped", 0.006)},
+     "undecided", [1.25, 1.5], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout"]),
     # a node moves the failure displacement at 1.5: the runout follows, no carrying on
     ({"reduction_F1.500": ("failed", 0.3), "runout": ("converged", 0.006)},
      "failed", [1.25, 1.5], ["equilibrium", "reduction_F1.250", "reduction_F1.500", "runout"]),
