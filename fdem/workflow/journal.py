@@ -104,6 +104,9 @@ class RunJournal:
                    "stage": None if self.current is None else self.current(), "why": why}
         t0 = time.perf_counter()
         save_checkpoint(sim, self.path, context=context)
+        # the interval runs from the end of the write: a write slower than the interval (a large
+        # model, a loaded disk or CPU) must not make every later tick write again
+        self._last_write = time.monotonic()
         if hasattr(sim, "output_seconds"):
             sim.output_seconds["checkpoints"] += time.perf_counter() - t0
         self.writes.append((why, int(sim.state.step)))
