@@ -309,3 +309,29 @@ def test_an_element_is_activated_only_once_it_has_slipped_or_opened_a_millimetre
     x[cn[e[4], 2:]] += 5e-3 * t[e[4]]                                      # moved, but elastic
     assert list(crack_status(cracks, x)[e]) == [ACTIVATED, ACTIVATED, INTACT, BROKEN, INTACT]
     assert list(crack_status(cracks)[e]) == [ACTIVATED, ACTIVATED, ACTIVATED, BROKEN, INTACT]  # no positions
+
+
+def test_periodic_checkpoint_interval_runs_from_the_end_of_the_last_write(monkeypatch, tmp_path):
+    """A write that takes longer than the interval (a large model, a loaded machine) must not make
+    every later tick write again: with writes of 2 s (a fake clock), an interval of 1 s and ticks
+    0.5 s of stepping apart, a write comes every second tick (1 s of stepping after the last
+    write ended), 12 in 24 ticks; timed from the start of the write, every tick after the first
+    write would write (23)."""
+    import types
+
+    import fdem.solve.checkpoint as checkpoint
+    from fdem.workflow import journal as journal_module
+
+    clock = [0.0]
+    monkeypatch.setattr(journal_module.time, "monotonic", lambda: clock[0])
+
+    def slow_save(sim, path, context=None):
+        clock[0] += 2.0
+
+    monkeypatch.setattr(checkpoint, "save_checkpoint", slow_save)
+    j = journal_module.RunJournal(tmp_path / "checkpoint.npz", every_seconds=1.0)
+    sim = types.SimpleNamespace(state=types.SimpleNamespace(step=0))
+    for _ in range(24):
+        clock[0] += 0.5   # half a second of stepping between ticks
+        j.tick(sim)
+    assert len(j.writes) == 12
