@@ -453,6 +453,21 @@ def start_journal(sim, args, folder=None):
     return RunJournal(path, every)
 
 
+def save_final_state(sim, out, outcome: str) -> Path | None:
+    """``final_state.npz`` in ``out``: the end state of a slope run, to restart from or look at
+    (:func:`fdem.solve.checkpoint.save_checkpoint`). Not written where there is no state worth
+    keeping (``unstable``: the journal's ``checkpoint.npz`` holds the last good one;
+    ``write_error``: no room) nor where another file already holds it (``interrupted``:
+    ``checkpoint.npz``, or ``interrupted_state.npz`` for a factor-of-safety trial cut short): at
+    326,755 triangles each copy is over 100 MB and seconds of writing, time in which a
+    supervisor's SIGKILL may follow its SIGTERM. Returns the path written, or None."""
+    if outcome in ("unstable", "write_error", "interrupted"):
+        return None
+    from fdem.solve.checkpoint import save_checkpoint
+
+    return save_checkpoint(sim, Path(out) / "final_state.npz")
+
+
 def failing_factor_words(summary: dict) -> str:
     """``", failed at F = 1.430"`` for the result line of a slope case; an ``undecided`` run (its
     stage at F did not settle and its runout was capped before it told a creep from a collapse)

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import (add_resume_options, add_write_scene_option, cap_simulated_time, case_parser, check_common, check_mesh_size,
-                               finish_run, open_run, prepare_run, report_runout_cost,
+                               finish_run, open_run, prepare_run, report_runout_cost, save_final_state,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
                                use_density_scaling, write_case_scene, write_report)
 
@@ -375,7 +375,6 @@ def main(argv=None) -> dict:
                                                     workflow, extents, tensile), args.write_scene, argv)
 
     from fdem.geometry.polygons import slope_toe
-    from fdem.solve.checkpoint import save_checkpoint
     from fdem.mesh.quality import quality_report
     from fdem.mesh.preview import plot_mesh_png, write_mesh_vtu
     from fdem.results.report import RunReport
@@ -438,8 +437,7 @@ def main(argv=None) -> dict:
         journal = start_journal(sim, args)
         try:
             result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
-            if result["outcome"] not in ("unstable", "write_error"):  # no state to restart from, or no room
-                save_checkpoint(sim, out / "final_state.npz")  # restart or inspect the end state
+            save_final_state(sim, out, result["outcome"])
         finally:
             sim.close()
         summary.update({"workflow": result, "outcome": result["outcome"], "ending": result.get("ending"),

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import (add_resume_options, add_write_scene_option, cap_simulated_time, case_parser, check_common, check_mesh_size,
-                               finish_run, prepare_run, report_runout_cost,
+                               finish_run, prepare_run, report_runout_cost, save_final_state,
                                set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
                                use_density_scaling, write_case_scene, write_report, failing_factor_words)
 
@@ -167,7 +167,6 @@ def main(argv=None) -> dict:
 
     from fdem.geometry.polygons import slope_toe
     from fdem.results.report import RunReport
-    from fdem.solve.checkpoint import save_checkpoint
     from fdem.workflow.slope import SlopeWorkflow, factor_of_safety_figures, run_slope_workflow
 
     wall = time.perf_counter()
@@ -187,8 +186,7 @@ def main(argv=None) -> dict:
     journal = start_journal(sim, args)
     try:
         result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
-        if result["outcome"] not in ("unstable", "write_error"):  # the end state, to restart from or look at
-            save_checkpoint(sim, out / "final_state.npz")
+        save_final_state(sim, out, result["outcome"])
     finally:
         sim.close()
     extra = {"case": NAME, "size_m": args.size, "threads": threads, "toe": [toe_x, toe_y], "time_capped": time_capped(sim),

@@ -23,7 +23,7 @@ import warnings
 from pathlib import Path
 
 from fdem.cases.common import (_option_names, add_resume_options, cap_simulated_time, case_parser, check_common,
-                               check_mesh_size, finish_run, open_run, prepare_run, report_runout_cost, set_threads,
+                               check_mesh_size, finish_run, open_run, prepare_run, report_runout_cost, save_final_state, set_threads,
                                start_journal, stop_cleanly_on_signals, threads_for_mesh, time_capped,
                                use_density_scaling, write_report, failing_factor_words)
 from fdem.io.jsonable import write_json
@@ -165,7 +165,6 @@ def run_scene(parser, args, scene: dict) -> dict:
     from fdem.scene.objects import workflow as scene_workflow
     from fdem.scene.schema import SceneError
     from fdem.scene.write import write_scene
-    from fdem.solve.checkpoint import save_checkpoint
     from fdem.workflow.slope import factor_of_safety_figures, run_slope_workflow
 
     wall = time.perf_counter()
@@ -214,8 +213,7 @@ def run_scene(parser, args, scene: dict) -> dict:
     journal = start_journal(sim, args)
     try:
         result = run_slope_workflow(sim, workflow, out_dir=out, journal=journal)
-        if result["outcome"] not in ("unstable", "write_error"):
-            save_checkpoint(sim, out / "final_state.npz")
+        save_final_state(sim, out, result["outcome"])
     finally:
         sim.close()
     extra = {"case": NAME, "scene": sc["name"], "scene_file": str(out / SCENE_COPY), "size_m": sc["size"],

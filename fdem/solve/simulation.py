@@ -267,6 +267,10 @@ class Simulation:
         self.time_cap = time_cap
         self.user_dt = dt
         self.out_dir = Path(out_dir) if out_dir is not None else None
+        # set by a caller that writes its own resumable checkpoint when a run is interrupted (a
+        # journaled workflow stage): the run then leaves the interrupted state to it, so that
+        # the file a resume needs is written first and the state is not written twice
+        self.caller_checkpoints_interrupts = False
         self.name = name
         self.progress = progress
         self.pictures = pictures
@@ -748,8 +752,8 @@ class Simulation:
         except KeyboardInterrupt:
             # a whole step is worth keeping; a GPU batch in flight or half booked is no step's state
             mid_batch = queued or (self._device is not None and self._device.in_batch)
-            if not STOP.forced and not mid_batch:
-                self._write_interrupted()
+            if not STOP.forced and not mid_batch and not self.caller_checkpoints_interrupts:
+                self.write_interrupted()
             raise
         finally:
             STOP.running -= 1
@@ -881,15 +885,19 @@ class Simulation:
         return "time step", (f"its nodes move at {speed:.3g} m/s against a P-wave speed of {c_p:.3g} m/s"
                              + (f", and the ledger's balance error was {balance:.2g} of its scale" if self.history else ""))
 
-    def _write_interrupted(self) -> Path | None:
+    def write_interrupted(self, checkpoint: bool = True) -> Path | None:
         """``interrupted_state.npz``: a full checkpoint of the state the run stopped in (loadable
-        with :func:`fdem.solve.checkpoint.load_checkpoint`), and its ``.vtu`` to look at."""
+        with :func:`fdem.solve.checkpoint.load_checkpoint`), and ``interrupted_state.vtu`` to look
+        at. ``checkpoint=False`` writes the ``.vtu`` alone, for a caller whose own checkpoint of
+        the same state was just written (:attr:`caller_checkpoints_interrupts`): at 326,755
+        triangles each copy of the state is over 100 MB and seconds of writing, time in which a
+        supervisor's SIGKILL may follow its SIGTERM. Returns the ``.npz`` path, or None."""
         self.sync_host()  # the GPU backend's state, mid-run
         if self.out_dir is None:
             return None
         from fdem.solve.checkpoint import save_checkpoint
 
-        path = save_checkpoint(self, self.out_dir / "interrupted_state.npz")
+        path = save_checkpoint(self, self.out_dir / "interrupted_state.npz") if checkpoint else None
         fields = self.fields()
         out.write_vtu(self.out_dir / "interrupted_state.vtu", self.state.x, self.triangles,
                       point_data=fields["point"], cell_data=fields["cell"])

@@ -434,6 +434,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     done = sim.state.step - step0
     if journal is not None:
         journal.current = runtime
+        sim.caller_checkpoints_interrupts = True  # the journal's checkpoint below is the interrupted state
     try:
         sim.run(n_steps=n_total - done, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
                 output_every=output_steps, stop_when=rule, final_output=frames)
@@ -441,12 +442,14 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         from fdem.solve.simulation import STOP
 
         if journal is not None and not STOP.forced:  # stopped at a whole step: the stage continues from here
-            journal.write(sim, "interrupted")
+            journal.write(sim, "interrupted")  # first: the file a resume needs
+            sim.write_interrupted(checkpoint=False)  # then the state's .vtu, to look at
         raise
     finally:
         sim.dt_fraction = sim_dt_fraction   # the next stage chooses its step afresh
         if journal is not None:
             journal.current = None
+            sim.caller_checkpoints_interrupts = False
     wall = wall_before + time.perf_counter() - wall
     reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
     if reason == "capped":
