@@ -9,8 +9,12 @@ centroid has travelled ``move_distance`` from there. At the end of a run this te
   than ``threshold`` and then stopped while the rest of the mass ran on. A failed triangle is
   locked when, at the last row it moved, the failed mass's 90th area percentile of displacement
   ``D90`` was still below ``locked_share`` (one half) of its final value: it came to rest before
-  the mass had run half its way. The paper's "kinematically locked" blocks of a wedge that jams
-  against the toe while the blocks above it run out are such a part;
+  the mass had run half its way, and it is joined to the mass that ran on through displaced
+  triangles (the crack elements between them, broken or not). The paper's "kinematically
+  locked" blocks of a wedge that jams against the toe while the blocks above it run out are such
+  a part. A slab that slipped and stopped with unmoved rock between it and the running mass (a
+  joint slipping beside a roller or a side band) took no part in the mechanism: it is counted
+  apart (``stopped_apart_m2``), not as locked;
 * the **mid-failure state** (:meth:`MotionRecord.mid_failure`): positions and the crack elements'
   status (intact, activated, broken) kept each time ``D90`` grows by ``sqrt(2)``, so the one
   nearest half the final ``D90`` can be drawn after the run (the paper's Fig. 3 shows a slope
@@ -30,7 +34,7 @@ import math
 
 import numpy as np
 
-from fdem.results.analysis import weighted_percentile
+from fdem.results.analysis import fragments, weighted_percentile
 
 __all__ = ["MotionRecord", "INTACT", "ACTIVATED", "BROKEN", "ACTIVATED_OFFSET", "crack_status"]
 
@@ -156,15 +160,24 @@ class MotionRecord:
         """The locked part of the failed mass at positions ``x`` (see the module docstring):
         ``mask`` (n_tri,) bool and the figures ``area_m2``, ``share_of_failed``, ``n_triangles``,
         ``mean_displacement_m``, ``stopped_s`` (first and last time one of them moved), the final
-        ``d90_m`` and the ``criterion``. A mass whose D90 did not exceed twice ``threshold`` ran
-        nowhere: nothing is locked."""
+        ``d90_m`` and the ``criterion``; ``stopped_apart_m2`` and ``stopped_apart_triangles``:
+        failed triangles that stopped as early but are not joined to the mass that ran on (not
+        locked). A mass whose D90 did not exceed twice ``threshold`` ran nowhere: nothing is
+        locked."""
         d = np.linalg.norm(self._centroids(x) - self._c0, axis=1)
         failed = d > self.threshold
         final = weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
-        mask = failed & (self.moved_d90 < self.locked_share * final) if final > 2.0 * self.threshold \
+        stopped = failed & (self.moved_d90 < self.locked_share * final) if final > 2.0 * self.threshold \
             else np.zeros(len(d), bool)
+        # the displaced triangles fall into bodies linked by crack elements with displaced
+        # triangles on both sides; a stopped triangle is locked in a body that also ran on
+        pairs = self.topology.crack_triangles
+        _, body = fragments(self.topology, ~(failed[pairs[:, 0]] & failed[pairs[:, 1]]))
+        joined = np.isin(body, body[failed & ~stopped])
+        mask, apart = stopped & joined, stopped & ~joined
         area_failed = float(self._area[failed].sum())
         out = {"mask": mask, "n_triangles": int(mask.sum()), "area_m2": float(self._area[mask].sum()),
+               "stopped_apart_m2": float(self._area[apart].sum()), "stopped_apart_triangles": int(apart.sum()),
                "share_of_failed": float(self._area[mask].sum() / area_failed) if area_failed > 0 else 0.0,
                "failed_area_m2": area_failed, "d90_m": float(final),
                "mean_displacement_m": float(np.average(d[mask], weights=self._area[mask])) if mask.any() else 0.0,
@@ -173,7 +186,7 @@ class MotionRecord:
                "since_step": self.since_step,
                "criterion": (f"displaced more than {self.threshold:g} m and last moved ({self.move_distance:g} m of "
                              f"travel) while the failed mass's D90 was below {self.locked_share:g} of its final "
-                             f"{final:.3g} m")}
+                             f"{final:.3g} m, joined to the mass that ran on through displaced triangles")}
         return out
 
     # ------------------------------------------------------------------ checkpoint

@@ -16,7 +16,8 @@ from fdem.workflow.stages import StageResult
 TOPO = build_topology(structured_rectangle(20, 4, 20.0, 4.0))  # 1 m cells, 160 triangles of 0.5 m^2
 C0 = TOPO.x0[TOPO.triangles].mean(axis=1)
 JAMMED = C0[:, 0] < 4.0  # 16 m^2: moves 0.5 m, then stops
-RUNNER = C0[:, 0] > 12.0  # 32 m^2: runs 8 m
+RUNNER = C0[:, 0] > 4.0  # 64 m^2, beside the jammed block: runs 8 m
+FAR_RUNNER = C0[:, 0] > 12.0  # 32 m^2, unmoved rock between it and the jammed block
 
 
 class Rows:
@@ -32,14 +33,14 @@ class Rows:
         self.state.time, self.state.step = t, self.state.step + 100
 
 
-def run_rows(record, sim=None):
+def run_rows(record, sim=None, runner=RUNNER):
     sim = sim or Rows()
     record(sim)  # the first row anchors
     for k in range(1, 5):  # 0.125 m per row for both: the jammed block stops at 0.5 m (t = 0.4 s)
-        sim.move(JAMMED | RUNNER, 0.125, 0.1 * k)
+        sim.move(JAMMED | runner, 0.125, 0.1 * k)
         record(sim)
     for k in range(5, 20):  # the runner alone, 0.5 m per row, to 8 m
-        sim.move(RUNNER, 0.5, 0.1 * k)
+        sim.move(runner, 0.5, 0.1 * k)
         record(sim)
     return sim
 
@@ -50,10 +51,22 @@ def test_a_block_that_stops_while_the_mass_runs_on_is_locked_and_one_that_runs_i
     got = rec.locked(sim.state.x)
     assert np.array_equal(got["mask"], JAMMED)
     assert got["area_m2"] == pytest.approx(16.0)
-    assert got["share_of_failed"] == pytest.approx(16.0 / 48.0)
+    assert got["share_of_failed"] == pytest.approx(16.0 / 80.0)
     assert got["mean_displacement_m"] == pytest.approx(0.5)
     assert got["stopped_s"] == pytest.approx([0.4, 0.4])  # the row it last travelled 2.5 cm
     assert got["d90_m"] == pytest.approx(8.0)
+    assert got["stopped_apart_m2"] == 0.0
+
+
+def test_a_slab_that_stopped_apart_from_the_running_mass_is_not_locked():
+    # the same motion, with 8 m of unmoved rock between the block that stopped and the runner:
+    # a slab slipping and stopping beside a roller, not a block jammed in the failing mass
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = run_rows(rec, runner=FAR_RUNNER)
+    got = rec.locked(sim.state.x)
+    assert got["n_triangles"] == 0 and got["area_m2"] == 0.0
+    assert got["stopped_apart_m2"] == pytest.approx(16.0) and got["stopped_apart_triangles"] == int(JAMMED.sum())
+    assert got["failed_area_m2"] == pytest.approx(48.0)
 
 
 def test_a_mass_that_moves_together_has_no_locked_part():
