@@ -247,8 +247,10 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
     if frag:
         rows.append(("fragments", f"{frag.get('n_fragments', 0):,}, {frag.get('n_blocks', 0):,} of them blocks of more "
                                   f"than one triangle"))
+    apart = locked.get("stopped_apart_m2")  # summaries written before the rule told the two apart have none
     rows.append(("locked mass", f"{locked.get('area_m2', 0):.3g} m^2 ({100 * locked.get('share_of_failed', 0):.3g} % of "
-                                f"the failed mass)" if locked else "-"))
+                                f"the failed mass)" + (f"; {apart:.3g} m^2 stopped apart from it" if apart else "")
+                 if locked else "-"))
     bnd = summary.get("boundaries") or (frame or {}).get("boundaries")
     if bnd:
         rows.append(("boundaries", "; ".join(f"{side} {d['max_displacement_m'] * 1e3:.3g} mm (slip along it "
