@@ -122,6 +122,29 @@ def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
     assert_same_run(uninterrupted, out)
 
 
+def test_a_factor_of_safety_trial_cut_short_keeps_its_mid_trial_state(tmp_path):
+    # a trial restarts from its start state on resume, which the journal's checkpoint holds; the
+    # state the trial had reached is kept apart, to look at, and no final_state.npz repeats either
+    out = tmp_path / "run"
+    proc = start(out, "--fos")
+    history = out / "history.csv"
+
+    def rows_of_the_upper_trial() -> int:  # F = 2.0 fails and runs to its cap: hundreds of rows
+        return sum(1 for line in history.open() if line.startswith("trial_F2")) if history.exists() else 0
+
+    t0 = time.monotonic()
+    while rows_of_the_upper_trial() < 3:  # well inside a trial, not between two
+        if proc.poll() is not None or time.monotonic() - t0 > 240:
+            pytest.fail(f"the trial at F = 2 did not begin:\n{proc.stdout.read() if proc.poll() is not None else ''}")
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    log = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 130, log
+    trial, start_state = state(out / "interrupted_state.npz"), state(out / "checkpoint.npz")
+    assert trial["step"] > start_state["step"] > 0  # the trial had stepped on from its start
+    assert (out / "interrupted_state.vtu").is_file() and not (out / "final_state.npz").exists()
+
+
 def test_sigkill_then_resume_from_the_periodic_checkpoint(uninterrupted, tmp_path):
     out = tmp_path / "run"
     proc = start(out, "--checkpoint-every", "0.3")
