@@ -458,7 +458,7 @@ def save_final_state(sim, out, outcome: str) -> Path | None:
     (:func:`fdem.solve.checkpoint.save_checkpoint`). Not written where there is no state worth
     keeping (``unstable``: the journal's ``checkpoint.npz`` holds the last good one;
     ``write_error``: no room) nor where another file already holds it (``interrupted``:
-    ``checkpoint.npz``, or ``interrupted_state.npz`` for a factor-of-safety trial cut short): at
+    ``checkpoint.npz``, a factor-of-safety trial cut short included): at
     326,755 triangles each copy is over 100 MB and seconds of writing, time in which a
     supervisor's SIGKILL may follow its SIGTERM. Returns the path written, or None."""
     if outcome in ("unstable", "write_error", "interrupted"):

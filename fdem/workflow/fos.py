@@ -27,7 +27,7 @@ from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, respo
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
-           "TRIALS_MARK"]
+           "TRIALS_MARK", "START_NAME"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -45,6 +45,12 @@ it says so (``FoSResult.ended_by``)."""
 TRIALS_MARK = "fos_trials"
 """The journal mark (:attr:`fdem.workflow.journal.RunJournal.marks`) holding a search's finished
 trials while it runs (:func:`factor_of_safety` ``journal``)."""
+
+START_NAME = "fos_start.npz"
+"""The search's start state, beside the journal's checkpoint (and in ``out_dir`` for parallel
+trials): every trial restarts from it. With a journal the checkpoint holds a trial in progress
+(written every ``--checkpoint-every`` seconds and when interrupted), so the start state a
+resumed search needs for its later trials is kept apart."""
 
 
 def _real(value) -> bool:
@@ -219,13 +225,52 @@ def _trial_stage_at(trial: Stage, factor: float) -> Stage:
                                gravity_factor=None)
 
 
-def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None) -> tuple[Trial, dict | None]:
+class _TrialJournal:
+    """The run's journal as one trial of a search sees it (:func:`run_stage` ``journal``): the
+    trial's periodic and interrupted checkpoints go into the run's checkpoint, with the trial's
+    runtime, so that a trial of hours goes on where it stopped; its end is not a workflow stage
+    (no entry in ``done``, no write: the search writes after restoring its start state)."""
+
+    def __init__(self, journal, resume: dict | None = None):
+        self.journal = journal
+        self.resume = resume
+
+    def next_stage(self, name: str) -> tuple[str, dict | None]:
+        runtime, self.resume = self.resume, None
+        return ("fresh", None) if runtime is None else ("resume", runtime)
+
+    @property
+    def current(self):
+        return self.journal.current
+
+    @current.setter
+    def current(self, runtime) -> None:
+        self.journal.current = runtime
+
+    def tick(self, sim) -> None:
+        self.journal.tick(sim)
+
+    def write(self, sim, why: str):
+        return self.journal.write(sim, why)
+
+    def stage_finished(self, sim, result: dict) -> None:
+        self.journal.current = None
+
+
+def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None, journal=None,
+               first_row: int | None = None) -> tuple[Trial, dict | None]:
     """One trial on ``sim`` (already restored to the starting state): the verdict (the stage
     converged, or ``judge(sim, result)`` when given), and for a failing trial what it broke
-    (failure surface, broken elements, positions, modes)."""
-    trigger.apply(sim, factor)
-    first_row = len(sim.history)
-    result = run_stage(sim, _trial_stage_at(trial, factor), frames=False)
+    (failure surface, broken elements, positions, modes).
+
+    ``journal`` (a :class:`_TrialJournal`): the trial writes resumable checkpoints; one whose
+    ``resume`` holds a runtime continues the trial from the restored mid-trial state, the
+    factor already applied (applied again it would re-project damaged elements onto their
+    envelope), its history rows from ``first_row`` on."""
+    if journal is None or journal.resume is None:
+        trigger.apply(sim, factor)
+    first_row = len(sim.history) if first_row is None else first_row
+    result = run_stage(sim, _trial_stage_at(trial, factor), frames=False, journal=journal)
     stable = bool(judge(sim, result)) if judge is not None else result.reason == "converged"
     info = None
     cracks = sim.cracks
@@ -291,10 +336,16 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     in it (its verdict and stage result; the first failing trial's broken elements and positions
     for the picture) and the checkpoint is written, holding the search's start state. A trial
     the journal already holds is not run again, so a search cut short (the end of a session in
-    a bisection of hours) goes on from its last finished trial when the run is resumed: the
-    trial under way is lost, never the ones before it. The trials are the same as in a search
-    that was never cut (each starts from the same state, and the bisection's points follow from
-    the verdicts alone), and ``wall_seconds`` counts the replayed trials' own.
+    a bisection of hours) goes on from its last finished trial when the run is resumed. The
+    trial under way is kept too, with one trial at a time: it writes the journal's periodic
+    checkpoint and, when interrupted, its state there with its stage's runtime, the start state
+    kept apart in :data:`START_NAME` beside the checkpoint; resumed, it goes on from that state
+    (a trial of the 0.5 m low-angle scene is an hour; restarted at every session's end, a
+    search of such trials loses one each time). Parallel trials (``workers > 1``) under way are
+    lost. The trials are the same as in a search that was never cut (each starts from the same
+    state, the bisection's points follow from the verdicts alone, and a trial resumed takes
+    the history steps of the uninterrupted one), and ``wall_seconds`` counts the replayed
+    trials' own.
     """
     from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
 
@@ -310,8 +361,6 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if trial.converge is None and judge is None:
         raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
                          "or a judge of its end state")
-    start_factor = trigger.current(sim)
-    start = snapshot(sim)
     cracks = sim.cracks
     trials: list[Trial] = []
     first_fail: dict = {}
@@ -323,14 +372,36 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     search = {"lower": float(lower), "upper": float(upper), "tol": float(tol), "trigger": trigger.name,
               "trial": trial.name, "max_time": trial.max_time}
     progress = None
+    cut = None   # (factor, runtime, state) of a trial the checkpoint holds in progress
+    start_file = None if journal is None or journal.path is None or workers > 1 else journal.path.with_name(START_NAME)
     if journal is not None:
         progress = journal.marks.get(TRIALS_MARK)
         if progress is not None and progress.get("search") != search:
             warn(f"factor of safety: the {len(progress['trials'])} trial(s) in the checkpoint belong to another "
                  f"search ({progress.get('search')}); they are not replayed")
             progress = None
-        if progress is None:
+        fresh = progress is None
+        if fresh:
             progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}
+        running, runtime = progress.get("running"), journal.resume
+        if (workers == 1 and running is not None and runtime is not None
+                and runtime.get("name") == _trial_stage_at(trial, float(running)).name):
+            # resumed inside a trial: the state loaded is the trial's, the search starts from
+            # the state kept apart when it began
+            if start_file is None or not start_file.is_file():
+                raise ValueError(f"resume: the checkpoint was written in the factor-of-safety trial at "
+                                 f"{trigger.name} {float(running):.6g}, but the search's start state "
+                                 f"{start_file} is missing; start the run again")
+            from fdem.solve.checkpoint import load_checkpoint
+
+            journal.resume = None
+            cut = (float(running), runtime, snapshot(sim))
+            load_checkpoint(sim, start_file)
+            sim.continue_outputs()  # history.csv back to the search's start, the trials' rows then in order
+        elif start_file is not None and (fresh or not start_file.is_file()):
+            save_checkpoint(sim, start_file)
+    start_factor = trigger.current(sim)
+    start = snapshot(sim)
     replayed = {float(d["factor"]): d for d in progress["trials"]} if progress else {}
     replayed_wall = 0.0
 
@@ -347,6 +418,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         if progress is not None and not from_journal:
             # the trial's verdict, and the search's start state, onto disk before the next trial
             # (a worker's rows never reached this run's history.csv: none to write again)
+            progress.pop("running", None)
             progress["trials"].append({**t.as_dict(), "rows": t.rows if pool is None else []})
             progress["first_fail"] = dict(first_fail) if first_fail else None
             restore(sim, start)
@@ -374,10 +446,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
 
         if out_dir is not None:
             Path(out_dir).mkdir(parents=True, exist_ok=True)
-            checkpoint = Path(out_dir) / "fos_start.npz"
+            checkpoint = Path(out_dir) / START_NAME
         else:
             tmp = tempfile.TemporaryDirectory(prefix="fdem_fos_")
-            checkpoint = Path(tmp.name) / "fos_start.npz"
+            checkpoint = Path(tmp.name) / START_NAME
         save_checkpoint(sim, checkpoint)
         # workers inherit the environment: one Numba thread each, so trials do not fight for cores
         saved_env = os.environ.get("NUMBA_NUM_THREADS")
@@ -385,12 +457,24 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
 
     def run_many(factors: list[float]) -> list[bool]:
+        nonlocal cut
         verdicts = {f: replay(f) for f in factors if f in replayed}
         todo = [f for f in factors if f not in verdicts]
         if pool is None:
             for f in todo:
-                restore(sim, start)
-                verdicts[f] = record(_run_trial(sim, trigger, trial, f, judge))
+                resume = None
+                if cut is not None and cut[0] == f:  # the trial the checkpoint holds: on from where it stopped
+                    _, resume, state = cut
+                    restore(sim, state)
+                    sim.write_history_rows(sim.history[len(start["history"]):])
+                else:
+                    restore(sim, start)
+                cut = None
+                if progress is not None:
+                    progress["running"] = f  # a checkpoint written inside the trial names it
+                verdicts[f] = record(_run_trial(sim, trigger, trial, f, judge,
+                                                journal=None if journal is None else _TrialJournal(journal, resume),
+                                                first_row=len(start["history"])))
         else:
             futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)
                        for f in todo]

@@ -220,9 +220,12 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         summary["interrupted_at_s"] = float(sim.state.time)
         if STOP.forced:  # a second signal: mid-step, so the last periodic or stage checkpoint is the one to resume
             summary["ending"] += "; stopped mid-step by a second signal: resume from the last checkpoint"
+        # between stages nothing has written the stop yet; a stage (a factor-of-safety trial
+        # among them) wrote its own state and runtime when the signal came, which the search's
+        # restored start state must not overwrite
         if (journal is not None and journal.current is None and not STOP.forced
-                and not journal.writes[-1:] == [("interrupted", sim.state.step)]):
-            journal.write(sim, "interrupted")  # between stages (or in a factor-of-safety trial: its start state)
+                and not (journal.writes and journal.writes[-1][0] == "interrupted")):
+            journal.write(sim, "interrupted")
     except OSError as err:
         # a frame or checkpoint could not be written (a full disk, a folder gone read-only): the
         # run stops with the reason; the stages so far and the last checkpoint are kept

@@ -122,9 +122,18 @@ def test_sigterm_then_resume_is_bit_identical(uninterrupted, tmp_path):
     assert_same_run(uninterrupted, out)
 
 
-def test_a_factor_of_safety_trial_cut_short_keeps_its_mid_trial_state(tmp_path):
-    # a trial restarts from its start state on resume, which the journal's checkpoint holds; the
-    # state the trial had reached is kept apart, to look at, and no final_state.npz repeats either
+@pytest.fixture(scope="module")
+def uninterrupted_fos(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("whole_fos") / "run"
+    done = fdem("run", "quick-start", *SCENE, "--fos", "--out", str(out))
+    assert done.returncode == 0, done.stdout + done.stderr
+    return out
+
+
+def test_a_factor_of_safety_trial_cut_short_goes_on_where_it_stopped(uninterrupted_fos, tmp_path):
+    # the state the trial had reached is the resumable checkpoint, with the trial's runtime; the
+    # search's start state, from which the later trials begin, is kept apart in fos_start.npz;
+    # resumed, the run ends as the search never cut, history.csv and all
     out = tmp_path / "run"
     proc = start(out, "--fos")
     history = out / "history.csv"
@@ -140,9 +149,18 @@ def test_a_factor_of_safety_trial_cut_short_keeps_its_mid_trial_state(tmp_path):
     proc.send_signal(signal.SIGINT)
     log = proc.communicate(timeout=120)[0]
     assert proc.returncode == 130, log
-    trial, start_state = state(out / "interrupted_state.npz"), state(out / "checkpoint.npz")
-    assert trial["step"] > start_state["step"] > 0  # the trial had stepped on from its start
-    assert (out / "interrupted_state.vtu").is_file() and not (out / "final_state.npz").exists()
+    saved = read_checkpoint(out / "checkpoint.npz")
+    assert saved["context"]["stage"]["name"] == "trial_F2.0000"
+    assert saved["state"]["step"] > state(out / "fos_start.npz")["step"] > 0  # the trial had stepped on
+    assert not (out / "interrupted_state.npz").exists() and not (out / "final_state.npz").exists()
+    assert (out / "interrupted_state.vtu").is_file()
+    resumed = fdem("run", "quick-start", "--resume", str(out))
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    a = json.loads((uninterrupted_fos / "summary.json").read_text())["workflow"]["fos"]
+    b = json.loads((out / "summary.json").read_text())["workflow"]["fos"]
+    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
+    assert [key(t) for t in b["trials"]] == [key(t) for t in a["trials"]] and b["bracket"] == a["bracket"]
+    assert_same_run(uninterrupted_fos, out)
 
 
 def test_sigkill_then_resume_from_the_periodic_checkpoint(uninterrupted, tmp_path):

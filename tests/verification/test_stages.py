@@ -256,6 +256,82 @@ def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monke
     assert fos_module.TRIALS_MARK not in journal.marks  # a finished search leaves only its result behind
 
 
+def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch):
+    """A trial of an hour must not be run again from its start at every session's end. With
+    periodic checkpoints at every history row, a run killed on the fifth row of its third trial
+    holds that trial in its checkpoint (its runtime and the search's start state kept apart in
+    fos_start.npz); resumed, it runs only the rest of that trial, then the trials not yet begun,
+    and ends as a search never cut: the same trials and bracket, the same state to the bit after
+    the stage that follows, the same history.csv."""
+    from fdem.solve.checkpoint import read_checkpoint
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.journal import RunJournal
+
+    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))
+    whole_sim = planar_slope_scene(out_dir=tmp_path / "whole", pictures=False).sim
+    whole = run_slope_workflow(whole_sim, wf)
+    whole_sim.close()
+    run_trial = fos_module._run_trial
+    calls = []
+
+    class Killed(Exception):
+        pass
+
+    def killed_in_the_third(sim, *args, **kwargs):
+        calls.append(args[2])
+        if len(calls) == 3:
+            record_row = sim._record_row
+
+            def dies_on_the_fifth_row(*a, **k):
+                if sum(1 for r in sim.history if r["stage"].startswith("trial")) >= 5:
+                    raise Killed
+                return record_row(*a, **k)
+
+            monkeypatch.setattr(sim, "_record_row", dies_on_the_fifth_row)
+        return run_trial(sim, *args, **kwargs)
+
+    monkeypatch.setattr(fos_module, "_run_trial", killed_in_the_third)
+    out = tmp_path / "cut"
+    cut_sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    with pytest.raises(Killed):
+        run_slope_workflow(cut_sim, wf, journal=RunJournal(out / "checkpoint.npz", every_seconds=1e-9))
+    cut_sim.close()
+    third = whole["fos"]["trials"][2]
+    context = read_checkpoint(out / "checkpoint.npz")["context"]
+    assert context["stage"]["name"] == f"trial_F{third['factor']:.4f}"   # inside the third trial
+    assert context["marks"][fos_module.TRIALS_MARK]["running"] == third["factor"]
+    assert (out / fos_module.START_NAME).is_file()
+    stopped_at = read_checkpoint(out / "checkpoint.npz")["state"]["step"]
+    assert stopped_at > read_checkpoint(out / fos_module.START_NAME)["state"]["step"]
+
+    calls.clear()
+    resumed_steps = []
+
+    def counted(sim, *a, **k):
+        calls.append(a[2])
+        step = sim.state.step
+        outcome = run_trial(sim, *a, **k)
+        resumed_steps.append(sim.history[-1]["step"] - step)
+        return outcome
+
+    monkeypatch.setattr(fos_module, "_run_trial", counted)
+    sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    journal = RunJournal.resume_from(sim, out / "checkpoint.npz", every_seconds=1e-9)
+    sim.continue_outputs()
+    resumed = run_slope_workflow(sim, wf, journal=journal)
+    sim.close()
+    assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]
+    assert 0 < resumed_steps[0] < third["steps"]   # the third trial went on, it did not start again
+    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
+    assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
+    assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
+    assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
+        [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
+    a, b = whole_sim.state_dict(), sim.state_dict()
+    assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
+    assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
+
+
 def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
     """Undamped, a slope in equilibrium rings elastically for ever at a kinetic energy that no
     small share of its own small peak bounds: the kinetic-energy rule alone runs such a stage to
