@@ -49,6 +49,34 @@ def default_name(summary: dict) -> str:
     return name
 
 
+def locked_now(run: Path, summary: dict) -> dict | None:
+    """The locked part of the run's failed mass by this code's rule
+    (:meth:`fdem.results.motion.MotionRecord.locked`), from the motion record and positions of
+    the state the summary was written on (``final_state.npz``, or ``checkpoint.npz`` of a run
+    stopped part-way) and the run's mesh (``<scene>.npz``, the form of the scene name before
+    the size); ``None`` when one of them is missing. A run carried on by an older commit wrote
+    its summary with that commit's rule: the rule is one source, applied again here."""
+    from fdem.mesh.mesh import Mesh
+    from fdem.mesh.topology import build_topology
+    from fdem.results.motion import MotionRecord
+    from fdem.solve.checkpoint import read_checkpoint
+
+    state_file = run / ("checkpoint.npz" if summary.get("outcome") in STOPPED else "final_state.npz")
+    meshes = sorted(run.glob(f"{summary.get('scene', '')}.npz"))
+    if not state_file.is_file() or not meshes:
+        return None
+    state = read_checkpoint(state_file)["state"]
+    if float(state["time"]) != float(summary.get("simulated_time_s", state["time"])):
+        return None  # a checkpoint written after the summary (a run carried on since)
+    records = state.get("monitor_records") or {}
+    if "failed_d90" not in records:
+        return None
+    topology = build_topology(Mesh.load(meshes[0]))
+    record = MotionRecord(topology)
+    record.load_state_dict(records["failed_d90"])
+    return {k: v for k, v in record.locked(np.asarray(state["x"])).items() if k != "mask"}
+
+
 def _mode(d: dict) -> str:
     m = d.get("broken_by_mode") or d.get("by_mode") or {}
     return f"I {m.get('I', 0)} / II {m.get('II', 0)} / mixed {m.get('mixed', 0)}"
@@ -248,8 +276,10 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
         rows.append(("fragments", f"{frag.get('n_fragments', 0):,}, {frag.get('n_blocks', 0):,} of them blocks of more "
                                   f"than one triangle"))
     apart = locked.get("stopped_apart_m2")  # summaries written before the rule told the two apart have none
+    dragged = locked.get("dragged_m2")  # nor before it told dragged ground from carried blocks
     rows.append(("locked mass", f"{locked.get('area_m2', 0):.3g} m^2 ({100 * locked.get('share_of_failed', 0):.3g} % of "
                                 f"the failed mass)" + (f"; {apart:.3g} m^2 stopped apart from it" if apart else "")
+                 + (f"; {dragged:.3g} m^2 of ground dragged, not carried" if dragged else "")
                  if locked else "-"))
     bnd = summary.get("boundaries") or (frame or {}).get("boundaries")
     if bnd:
@@ -293,6 +323,12 @@ def main(argv=None) -> list[tuple[str, str]]:
     if summary.get("case") != "four-slopes" or not summary.get("workflow"):
         parser.error(f"{path} is not the summary of a four-slope workflow run")
     name = args.name or default_name(summary)
+    locked = locked_now(args.run, summary)
+    if locked is not None and locked != summary.get("locked"):
+        print(f"locked part by this code's rule: {locked['area_m2']:.3g} m^2 (the run's summary: "
+              f"{(summary.get('locked') or {}).get('area_m2', 0):.3g} m^2)", file=sys.stderr)
+        summary["locked"] = locked
+        summary["locked_rule_applied_at_publication"] = True
     frame = None if summary.get("boundaries") and summary.get("displaced_area_m2") else last_frame_figures(args.run)
     rows = figures(summary, frame)
     law = contact_law_of(args.run)
@@ -302,7 +338,7 @@ def main(argv=None) -> list[tuple[str, str]]:
         print(f"| {k} | {v} |")
     if not args.dry_run:
         DOCS.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, DOCS / f"{name}.json")
+        write_json(DOCS / f"{name}.json", summary)  # the run's summary, its locked part by this code's rule
         try:
             record = json.loads((args.run / "run.json").read_text())
         except (OSError, ValueError):

@@ -69,6 +69,38 @@ def test_a_slab_that_stopped_apart_from_the_running_mass_is_not_locked():
     assert got["failed_area_m2"] == pytest.approx(48.0)
 
 
+def test_ground_dragged_by_the_mass_without_moving_with_it_is_not_locked():
+    # the block beside the runner moves 0.25 m in two rows while the runner moves 2 m, then
+    # stops: ground settling behind a collapsing face (an eighth of the mass's D90 when it
+    # stopped), not a block carried by the mass and jammed
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = Rows()
+    rec(sim)
+    for k in (1, 2):
+        sim.move(JAMMED, 0.125, 0.1 * k)
+        sim.move(RUNNER, 1.0, 0.1 * k)
+        rec(sim)
+    for k in range(3, 9):
+        sim.move(RUNNER, 1.0, 0.1 * k)
+        rec(sim)
+    got = rec.locked(sim.state.x)
+    assert got["d90_m"] == pytest.approx(8.0)
+    assert got["n_triangles"] == 0 and got["stopped_apart_m2"] == 0.0
+    assert got["dragged_m2"] == pytest.approx(16.0) and got["dragged_triangles"] == int(JAMMED.sum())
+    # carried: the same block moving with the runner (1 m per row) for the two rows is locked
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = Rows()
+    rec(sim)
+    for k in (1, 2):
+        sim.move(JAMMED | RUNNER, 1.0, 0.1 * k)
+        rec(sim)
+    for k in range(3, 10):
+        sim.move(RUNNER, 1.0, 0.1 * k)
+        rec(sim)
+    got = rec.locked(sim.state.x)
+    assert np.array_equal(got["mask"], JAMMED) and got["dragged_m2"] == 0.0
+
+
 def test_a_mass_that_moves_together_has_no_locked_part():
     rec = MotionRecord(TOPO, threshold=0.1)
     sim = Rows()
@@ -123,7 +155,7 @@ def test_the_record_survives_its_state_dict():
 
 
 def test_bad_settings_are_refused():
-    for kw in ({"threshold": 0.0}, {"move_distance": -1.0}, {"locked_share": 1.0}):
+    for kw in ({"threshold": 0.0}, {"move_distance": -1.0}, {"locked_share": 1.0}, {"with_mass_share": 1.5}):
         with pytest.raises(ValueError):
             MotionRecord(TOPO, **kw)
 
