@@ -337,7 +337,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     for the picture) and the checkpoint is written, holding the search's start state. A trial
     the journal already holds is not run again, so a search cut short (the end of a session in
     a bisection of hours) goes on from its last finished trial when the run is resumed. The
-    trial under way is kept too, with one trial at a time: it writes the journal's periodic
+    trial under way is kept too, with one trial at a time and no ``judge``: it writes the journal's periodic
     checkpoint and, when interrupted, its state there with its stage's runtime, the start state
     kept apart in :data:`START_NAME` beside the checkpoint; resumed, it goes on from that state
     (a trial of the 0.5 m low-angle scene is an hour; restarted at every session's end, a
@@ -384,21 +384,27 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         if fresh:
             progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}
         running, runtime = progress.get("running"), journal.resume
-        if (workers == 1 and running is not None and runtime is not None
-                and runtime.get("name") == _trial_stage_at(trial, float(running)).name):
-            # resumed inside a trial: the state loaded is the trial's, the search starts from
-            # the state kept apart when it began
-            if start_file is None or not start_file.is_file():
-                raise ValueError(f"resume: the checkpoint was written in the factor-of-safety trial at "
-                                 f"{trigger.name} {float(running):.6g}, but the search's start state "
-                                 f"{start_file} is missing; start the run again")
-            from fdem.solve.checkpoint import load_checkpoint
-
+        in_trial = runtime is not None and str(runtime.get("name", "")).startswith(f"{trial.name}_F")
+        if in_trial and not (workers == 1 and judge is None and running is not None
+                             and runtime["name"] == _trial_stage_at(trial, float(running)).name):
+            raise ValueError(f"resume: the checkpoint was written in the factor-of-safety trial {runtime['name']!r}, "
+                             f"which this search ({workers} worker(s){', judged' if judge is not None else ''}, "
+                             f"{search}) cannot go on with; resume with the options the run started with")
+        if in_trial and (start_file is None or not start_file.is_file()):
+            raise ValueError(f"resume: the checkpoint was written in the factor-of-safety trial at {trigger.name} "
+                             f"{float(running):.6g}, but the search's start state {start_file} is missing; "
+                             f"start the run again")
+        if in_trial:  # the state loaded is the trial's, to go on with once the finished trials are replayed
             journal.resume = None
             cut = (float(running), runtime, snapshot(sim))
+        if not fresh and start_file is not None and start_file.is_file():
+            # a resumed search starts from the state kept apart when it began, whatever state the
+            # checkpoint holds (a trial's, or one written by a stop before the trial went on)
+            from fdem.solve.checkpoint import load_checkpoint
+
             load_checkpoint(sim, start_file)
             sim.continue_outputs()  # history.csv back to the search's start, the trials' rows then in order
-        elif start_file is not None and (fresh or not start_file.is_file()):
+        elif start_file is not None:
             save_checkpoint(sim, start_file)
     start_factor = trigger.current(sim)
     start = snapshot(sim)
@@ -472,8 +478,11 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                 cut = None
                 if progress is not None:
                     progress["running"] = f  # a checkpoint written inside the trial names it
+                # a judged trial's trigger keeps state outside the simulation (the shaking's
+                # record): its trials are not checkpointed inside, a cut one begins again
+                inside = journal is not None and judge is None
                 verdicts[f] = record(_run_trial(sim, trigger, trial, f, judge,
-                                                journal=None if journal is None else _TrialJournal(journal, resume),
+                                                journal=_TrialJournal(journal, resume) if inside else None,
                                                 first_row=len(start["history"])))
         else:
             futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)

@@ -263,7 +263,9 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     fos_start.npz); resumed, it runs only the rest of that trial, then the trials not yet begun,
     and ends as a search never cut: the same trials and bracket, the same state to the bit after
     the stage that follows, the same history.csv."""
-    from fdem.solve.checkpoint import read_checkpoint
+    import shutil
+
+    from fdem.solve.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
     from fdem.workflow import fos as fos_module
     from fdem.workflow.journal import RunJournal
 
@@ -303,6 +305,14 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     assert (out / fos_module.START_NAME).is_file()
     stopped_at = read_checkpoint(out / "checkpoint.npz")["state"]["step"]
     assert stopped_at > read_checkpoint(out / fos_module.START_NAME)["state"]["step"]
+    # the same folder as a stop right after a resume began would leave it: the trial's state,
+    # the trial named running, no stage runtime (written outside the time loop)
+    early = tmp_path / "stopped_early"
+    shutil.copytree(out, early)
+    probe = planar_slope_scene(out_dir=None, pictures=False).sim
+    context = load_checkpoint(probe, early / "checkpoint.npz")
+    save_checkpoint(probe, early / "checkpoint.npz", context={**context, "stage": None})
+    probe.close()
 
     calls.clear()
     resumed_steps = []
@@ -325,11 +335,46 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
     assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
     assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
+    assert resumed["fos"]["failure_broken_elements"] == whole["fos"]["failure_broken_elements"]
     assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
         [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
     a, b = whole_sim.state_dict(), sim.state_dict()
     assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
+    assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
     assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
+
+    # resumed from that state, the search starts from its own start state (fos_start.npz), not
+    # from the trial's: the third trial begins again and the run ends as the uncut one
+    calls.clear()
+    monkeypatch.setattr(fos_module, "_run_trial", run_trial)
+    sim = planar_slope_scene(out_dir=early, pictures=False).sim
+    journal = RunJournal.resume_from(sim, early / "checkpoint.npz")
+    sim.continue_outputs()
+    again = run_slope_workflow(sim, wf, journal=journal)
+    sim.close()
+    assert [key(t) for t in again["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
+    c = sim.state_dict()
+    assert np.array_equal(a["x"], c["x"]) and np.array_equal(a["v"], c["v"])
+    assert (tmp_path / "whole" / "history.csv").read_bytes() == (early / "history.csv").read_bytes()
+
+
+def test_a_checkpoint_inside_a_trial_is_refused_by_a_search_that_cannot_go_on_with_it(tmp_path):
+    """A checkpoint holding a trial's runtime, resumed by a search with parallel workers (whose
+    trials are not checkpointed inside), is refused before any trial, naming the trial: run on,
+    that search would start from the trial's state with the trial's factor applied."""
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.fos import factor_of_safety
+    from fdem.workflow.journal import RunJournal
+
+    sim = planar_slope_scene(out_dir=tmp_path, pictures=False).sim
+    journal = RunJournal(tmp_path / "checkpoint.npz")
+    journal.marks[fos_module.TRIALS_MARK] = {"search": {"lower": 1.0, "upper": 2.0, "tol": 0.1}, "trials": [],
+                                             "first_fail": None, "running": 1.5}
+    journal.resume = {"name": "trial_F1.5000"}
+    with pytest.raises(ValueError, match="trial_F1.5000"):
+        factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, workers=2, build=planar_slope_scene, journal=journal)
+    assert sim.state.step == 0   # nothing ran
+    sim.close()
 
 
 def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
