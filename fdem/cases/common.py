@@ -70,6 +70,11 @@ RESUME_OPTIONS = ("--threads", "--quiet", "--no-pictures", "--checkpoint-every",
                   "--runout-dt-fraction", "--backend")
 """The options that ``--resume`` accepts beside it (the others come from the run's ``run.json``)."""
 
+CARRY_ON_OPTION = "--runout-time"
+"""The option that ``--resume`` accepts for a *finished* run whose runout ran to its cap while
+still moving: the longer cap it is carried on to (:meth:`fdem.workflow.journal.RunJournal.carry_on`).
+A run to rest is hours at paper scale; started again with a longer cap it would repeat them."""
+
 SMALL_MESH_TRIANGLES = 20_000
 """Below this many triangles a case runs on one Numba thread unless ``--threads`` (or
 ``NUMBA_NUM_THREADS``) says otherwise: a step of a small mesh lasts well under a millisecond,
@@ -201,6 +206,31 @@ def _option_names(argv) -> list[str]:
     return [a.split("=", 1)[0] for a in argv if a.startswith("--")]
 
 
+def _check_carry_on(parser, folder: Path, argv) -> None:
+    """Refuse ``--resume DIR --runout-time T`` (before any meshing) unless the run's last stage is
+    a runout that ran to its cap, and ``T`` is longer than the time it ran."""
+    import json
+
+    i = [a.split("=", 1)[0] for a in argv].index(CARRY_ON_OPTION)
+    text = argv[i].split("=", 1)[1] if "=" in argv[i] else (argv[i + 1] if i + 1 < len(argv) else "")
+    try:
+        cap = float(text)
+    except ValueError:
+        parser.error(f"{CARRY_ON_OPTION} must be a number of simulated seconds, got {text!r}")
+    try:
+        stages = json.loads((folder / "summary.json").read_text())["workflow"]["stages"]
+    except (OSError, ValueError, KeyError, TypeError):
+        parser.error(f"--resume {folder} {CARRY_ON_OPTION}: no summary.json with the run's stages there")
+    last = stages[-1] if stages else {}
+    if not str(last.get("name", "")).startswith("runout") or last.get("reason") != "capped":
+        parser.error(f"--resume {folder} {CARRY_ON_OPTION}: the run's last stage is {last.get('name')!r}, which "
+                     f"ended {last.get('reason')!r}; only a runout that ran to its cap can be carried on")
+    ran = float(last["t_end"]) - float(last["t_start"])
+    if not cap > ran:
+        parser.error(f"--resume {folder} {CARRY_ON_OPTION} {text}: the runout already ran {ran:.4g} s; give a "
+                     f"longer cap")
+
+
 def _read_run_file(folder: Path) -> dict:
     import json
 
@@ -242,9 +272,18 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
         # checkpoint.npz, or a search's own (search_checkpoint.npz, a run stopped in its search)
         if not any(folder.glob("*checkpoint.npz")) and not any(folder.glob("*/*checkpoint.npz")):
             parser.error(f"--resume {folder}: no checkpoint.npz there (the run wrote none before it stopped)")
-        if record.get("outcome") not in (None, "interrupted", "unstable", "running", "error", "write_error"):
-            parser.error(f"--resume {folder}: that run has finished (outcome {record['outcome']!r}); nothing to resume")
-        others = [o for o in _option_names(argv) if o not in RESUME_OPTIONS + ("--resume",)]
+        finished = record.get("outcome") not in (None, "interrupted", "unstable", "running", "error", "write_error")
+        carry_on = CARRY_ON_OPTION in _option_names(argv)
+        if finished and not carry_on:
+            parser.error(f"--resume {folder}: that run has finished (outcome {record['outcome']!r}); nothing to resume"
+                         f" (a runout that ran to its cap still moving is carried on with {CARRY_ON_OPTION} SECONDS)")
+        if carry_on and not finished:
+            parser.error(f"--resume {folder} {CARRY_ON_OPTION}: a longer runout cap carries a finished run's capped "
+                         f"runout on; this run has not finished (outcome {record.get('outcome')!r}): resume it as it is")
+        if carry_on:
+            _check_carry_on(parser, folder, argv)
+        others = [o for o in _option_names(argv)
+                  if o not in RESUME_OPTIONS + ("--resume",) + ((CARRY_ON_OPTION,) if carry_on else ())]
         if others:
             parser.error(f"--resume takes the run's own options from {folder / RUN_FILE}; only "
                          f"{', '.join(RESUME_OPTIONS)} may be given again, not {', '.join(others)}")
@@ -252,6 +291,13 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
                                                       or (i and argv[i - 1] == "--resume"))]
         args = parser.parse_args(list(record.get("argv", [])) + again)
         args.resume, args.out, args.overwrite = folder, folder, False
+        args.carry_on = carry_on
+        if carry_on:  # the new cap is the run's own from now on (a later resume takes it from run.json)
+            kept = list(record.get("argv", []))
+            if CARRY_ON_OPTION in kept:
+                i = kept.index(CARRY_ON_OPTION)
+                del kept[i:i + 2]
+            record["argv"] = kept + [CARRY_ON_OPTION, repr(float(getattr(args, "runout_time")))]
         check_common(parser, args)
         record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
                       resumed_with=again, resumed_at=_now())
@@ -446,6 +492,12 @@ def start_journal(sim, args, folder=None):
     sim.dt_fraction = getattr(args, "dt_fraction", sim.dt_fraction)
     if getattr(args, "resume", None) is not None and path.is_file():
         journal = RunJournal.resume_from(sim, path, every)
+        if getattr(args, "carry_on", False):  # checked against summary.json by prepare_run
+            from fdem.solve.checkpoint import read_checkpoint
+
+            last = journal.carry_on(sim, "runout", lambda: read_checkpoint(path.with_name("runout_start.npz"))["state"]["x"])
+            say(f"carrying the {last['name']} stage on from t = {sim.state.time:.6g} s to a cap of "
+                f"{args.runout_time:g} s (it ran {last['t_end'] - last['t_start']:.4g} s to its cap)")
         sim.continue_outputs()
         say(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
               f"{len(journal.done)} stage(s) done" + (f", {journal.resume['name']} in progress" if journal.resume else ""))

@@ -119,7 +119,7 @@ def build(size: float = SIZE, out_dir: Path | None = None, pictures: bool = Fals
     return geo, sim, cracks, start
 
 
-def scene(size: float = SIZE, fos: bool = False) -> dict:
+def scene(size: float = SIZE, fos: bool = False, runout_time: float | None = None) -> dict:
     """This case as a scene file's contents (``fdem run quick-start --write-scene FILE``): the
     same outline, joints, rock, crack elements, contact, supports and workflow as :func:`build`,
     so that ``fdem run FILE`` runs the same model."""
@@ -140,7 +140,8 @@ def scene(size: float = SIZE, fos: bool = False) -> dict:
         "contact": {"penalty": PENALTY, "friction_angle": 28.0, "damping_ratio": CONTACT_DAMPING},
         "supports": {"bottom": "fixed", "left": "fix-x", "right": "fix-x"},
         "gravity": {"g": GRAVITY},
-        "workflow": {"kind": "strength-reduction", "fos": list(FOS_BRACKET) if fos else None},
+        "workflow": {"kind": "strength-reduction", "fos": list(FOS_BRACKET) if fos else None,
+                     **({"runout_time": runout_time} if runout_time is not None else {})},
     }
 
 
@@ -152,12 +153,15 @@ def main(argv=None) -> dict:
     parser.add_argument("--rigid-blocks", action="store_true",
                         help="first print the rigid-block factor of safety and mechanism of the same joints "
                              "(seconds; docs/rigid_blocks.md)")
+    parser.add_argument("--runout-time", type=float, default=None, metavar="SECONDS",
+                        help="cap on the runout stage [s of simulated time] (default: 20 response times or four "
+                             "free falls over the model height); with --resume, carries a capped runout on")
     add_resume_options(parser)
     add_write_scene_option(parser)
     args = parser.parse_args(argv)
     if args.write_scene is not None:
         check_common(parser, args)
-        return write_case_scene(parser, NAME, scene(args.size, args.fos), args.write_scene, argv or [])
+        return write_case_scene(parser, NAME, scene(args.size, args.fos, args.runout_time), args.write_scene, argv or [])
     args = prepare_run(parser, args, argv, NAME)
     check_common(parser, args)
     set_threads(args.threads)
@@ -172,7 +176,9 @@ def main(argv=None) -> dict:
     wall = time.perf_counter()
     out = args.out
     check_mesh_size(parser, geometry(), args.size)
-    workflow = SlopeWorkflow(fos=FOS_BRACKET if args.fos else None)
+    if args.runout_time is not None and not (math.isfinite(args.runout_time) and args.runout_time > 0):
+        parser.error(f"--runout-time must be a positive number of simulated seconds, got {args.runout_time}")
+    workflow = SlopeWorkflow(fos=FOS_BRACKET if args.fos else None, runout_time=args.runout_time)
     geo, sim, cracks, start = build(args.size, out, progress=not args.quiet)
     stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers
     toe_x, toe_y = slope_toe(geo.bodies[0])

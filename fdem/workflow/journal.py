@@ -26,10 +26,13 @@ import time
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["CHECKPOINT_NAME", "RunJournal"]
+__all__ = ["CHECKPOINT_NAME", "CAPPED_MARK", "RunJournal"]
 
 CHECKPOINT_NAME = "checkpoint.npz"
 """The journal's checkpoint file in a run's output folder."""
+
+CAPPED_MARK = "capped_stage_runtime"
+"""The journal mark holding the runtime of a last stage that ran to its cap (:meth:`RunJournal.carry_on`)."""
 
 
 class RunJournal:
@@ -82,11 +85,53 @@ class RunJournal:
         return self.marks[key]
 
     # ------------------------------------------------------------------ writing
-    def stage_finished(self, sim, result: dict) -> None:
-        """Record a finished stage and write the checkpoint (a stage end is a good state)."""
+    def stage_finished(self, sim, result: dict, runtime: dict | None = None) -> None:
+        """Record a finished stage and write the checkpoint (a stage end is a good state).
+        ``runtime``: the runtime of a stage that ran to its cap, kept (:data:`CAPPED_MARK`) until
+        the next stage ends, so that :meth:`carry_on` can continue it as if never capped."""
         self.done.append(dict(result))
         self.current = None
+        if runtime is not None:
+            self.marks[CAPPED_MARK] = runtime
+        else:
+            self.marks.pop(CAPPED_MARK, None)
         self.write(sim, "stage end")
+
+    def carry_on(self, sim, prefix: str, x_start) -> dict:
+        """Take the last finished stage back into progress: a stage named ``prefix...`` that ran
+        to its cap (``reason`` ``"capped"``), to be carried on by the workflow to the longer cap
+        it is now given (a runout capped while still moving, continued to rest). Its runtime at
+        the cap is the stage's own when the checkpoint kept it (:meth:`stage_finished`); for a
+        checkpoint written before it did, it is rebuilt from the stage's result and ``x_start()``
+        (the positions the stage started from, [m]), the end rules' windows beginning afresh.
+        The history row the cap added off the stage's history steps is dropped, so the carried-on
+        run's rows are those of a run never capped; its end rules have seen that row (one more
+        check, at the old cap, than the uncapped run). Returns the stage's result; a
+        ``ValueError`` says why a stage cannot be carried on."""
+        if not self.done:
+            raise ValueError("the run finished no stage: there is nothing to carry on")
+        last = self.done[-1]
+        if not str(last["name"]).startswith(prefix) or last["reason"] != "capped":
+            raise ValueError(f"the run's last stage is {last['name']!r}, which ended {last['reason']!r}: only a "
+                             f"{prefix} stage that ran to its cap can be carried on")
+        runtime = self.marks.pop(CAPPED_MARK, None)
+        if runtime is None or runtime.get("name") != last["name"]:
+            runtime = {"name": last["name"], "t0": float(last["t_start"]), "dt": float(last["dt"]),
+                       "step0": int(sim.state.step) - int(last["steps"]), "x_start": x_start(), "ramp": None,
+                       "status": {"reason": None, "detail": "", "peak": float(last["peak_kinetic_energy"]),
+                                  "ratio": float("nan"), "speed": 0.0, "disp": 0.0, "since": None},
+                       "wall_seconds": float(last["wall_seconds"]), "output_seconds": last.get("output_seconds")}
+        self.done.pop()
+        self.resume = {**runtime, "n_total": None}  # the steps to the new cap: counted by the stage
+        # the row the cap added off the stage's history steps goes: the run's rows, and the peak
+        # kinetic energy between rows, are those of a run never capped
+        rows = [r for r in sim.history if r.get("stage") == last["name"]]
+        if len(rows) >= 3 and sim.history[-1] is rows[-1]:
+            spacing = int(rows[1]["step"]) - int(rows[0]["step"])
+            if spacing > 0 and (int(rows[-1]["step"]) - int(rows[0]["step"])) % spacing:
+                cap_row = sim.history.pop()
+                sim.kinetic_peak = max(sim.kinetic_peak, float(cap_row.get("kinetic_peak", 0.0)))
+        return last
 
     def tick(self, sim) -> None:
         """Write a periodic checkpoint if ``every_seconds`` of wall time have passed."""

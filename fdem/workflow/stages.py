@@ -323,8 +323,11 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     if not frames:
         output_steps = 2 ** 62
     if kind == "resume":
-        t0, step0, n_total = float(saved["t0"]), int(saved["step0"]), int(saved["n_total"])
-        if float(saved.get("dt", dt)) != dt:  # resumed with another step (after an instability): same end time
+        t0, step0 = float(saved["t0"]), int(saved["step0"])
+        n_total = None if saved.get("n_total") is None else int(saved["n_total"])
+        if saved.get("n_total") is None or float(saved.get("dt", dt)) != dt:
+            # resumed with another step (after an instability), or a capped stage carried on to a
+            # longer cap (fdem.workflow.journal.RunJournal.carry_on): the steps to the stage's end time
             n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
         x_start = saved["x_start"].copy()
         ramp = None if saved["ramp"] is None else tuple(saved["ramp"])
@@ -465,5 +468,6 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
         period_stretch=stretch, output_seconds=output_so_far())
     if journal is not None:
-        journal.stage_finished(sim, result.as_dict())
+        # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one
+        journal.stage_finished(sim, result.as_dict(), runtime() if reason == "capped" else None)
     return result

@@ -163,6 +163,24 @@ def test_a_factor_of_safety_trial_cut_short_goes_on_where_it_stopped(uninterrupt
     assert_same_run(uninterrupted_fos, out)
 
 
+def test_a_runout_capped_while_moving_is_carried_on_to_rest(uninterrupted, tmp_path):
+    # a run to rest is hours at paper scale: one that hit its runout cap still moving is carried on
+    # with a longer cap, not started again, and ends as the run never capped, history.csv and all
+    out = tmp_path / "run"
+    capped = fdem("run", "quick-start", *SCENE, "--runout-time", "0.3", "--out", str(out))
+    assert capped.returncode == 0, capped.stdout + capped.stderr
+    last = json.loads((out / "summary.json").read_text())["workflow"]["stages"][-1]
+    assert last["name"] == "runout" and last["reason"] == "capped"
+    shorter = fdem("run", "quick-start", "--resume", str(out), "--runout-time", "0.2")
+    assert shorter.returncode == 2 and "longer cap" in shorter.stderr
+    at_rest = fdem("run", "quick-start", "--resume", str(uninterrupted), "--runout-time", "100")
+    assert at_rest.returncode == 2 and "ran to its cap" in at_rest.stderr   # nothing to carry on
+    carried = fdem("run", "quick-start", "--resume", str(out), "--runout-time", "100")
+    assert carried.returncode == 0, carried.stdout + carried.stderr
+    assert json.loads((out / "run.json").read_text())["argv"][-2:] == ["--runout-time", "100.0"]
+    assert_same_run(uninterrupted, out)
+
+
 def test_sigkill_then_resume_from_the_periodic_checkpoint(uninterrupted, tmp_path):
     out = tmp_path / "run"
     proc = start(out, "--checkpoint-every", "0.3")
