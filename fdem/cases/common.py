@@ -216,7 +216,9 @@ def _check_carry_on(parser, folder: Path, argv) -> None:
     try:
         cap = float(text)
     except ValueError:
-        parser.error(f"{CARRY_ON_OPTION} must be a number of simulated seconds, got {text!r}")
+        cap = float("nan")
+    if not (math.isfinite(cap) and cap > 0):  # before run.json is touched: a bad cap must not leave it "running"
+        parser.error(f"{CARRY_ON_OPTION} must be a positive number of simulated seconds, got {text!r}")
     try:
         stages = json.loads((folder / "summary.json").read_text())["workflow"]["stages"]
     except (OSError, ValueError, KeyError, TypeError):
@@ -280,6 +282,9 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
         if carry_on and not finished:
             parser.error(f"--resume {folder} {CARRY_ON_OPTION}: a longer runout cap carries a finished run's capped "
                          f"runout on; this run has not finished (outcome {record.get('outcome')!r}): resume it as it is")
+        if carry_on and record.get("outcome") == "time_capped":
+            parser.error(f"--resume {folder} {CARRY_ON_OPTION}: that run ended by its own --max-time, not by its "
+                         f"runout cap; run it again without --max-time")
         if carry_on:
             _check_carry_on(parser, folder, argv)
         others = [o for o in _option_names(argv)

@@ -162,6 +162,8 @@ def main(argv=None) -> dict:
     if args.write_scene is not None:
         check_common(parser, args)
         return write_case_scene(parser, NAME, scene(args.size, args.fos, args.runout_time), args.write_scene, argv or [])
+    if args.runout_time is not None and not (math.isfinite(args.runout_time) and args.runout_time > 0):
+        parser.error(f"--runout-time must be a positive number of simulated seconds, got {args.runout_time}")
     args = prepare_run(parser, args, argv, NAME)
     check_common(parser, args)
     set_threads(args.threads)
@@ -176,8 +178,6 @@ def main(argv=None) -> dict:
     wall = time.perf_counter()
     out = args.out
     check_mesh_size(parser, geometry(), args.size)
-    if args.runout_time is not None and not (math.isfinite(args.runout_time) and args.runout_time > 0):
-        parser.error(f"--runout-time must be a positive number of simulated seconds, got {args.runout_time}")
     workflow = SlopeWorkflow(fos=FOS_BRACKET if args.fos else None, runout_time=args.runout_time)
     geo, sim, cracks, start = build(args.size, out, progress=not args.quiet)
     stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers

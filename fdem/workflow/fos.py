@@ -253,7 +253,7 @@ class _TrialJournal:
     def write(self, sim, why: str):
         return self.journal.write(sim, why)
 
-    def stage_finished(self, sim, result: dict) -> None:
+    def stage_finished(self, sim, result: dict, runtime: dict | None = None) -> None:
         self.journal.current = None
 
 

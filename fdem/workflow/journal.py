@@ -125,10 +125,12 @@ class RunJournal:
         self.resume = {**runtime, "n_total": None}  # the steps to the new cap: counted by the stage
         # the row the cap added off the stage's history steps goes: the run's rows, and the peak
         # kinetic energy between rows, are those of a run never capped
+        # (off the steps: nearer its row before than that row is to the one before it; the
+        # stage's last spacing, as a stage resumed with another step has another spacing)
         rows = [r for r in sim.history if r.get("stage") == last["name"]]
         if len(rows) >= 3 and sim.history[-1] is rows[-1]:
-            spacing = int(rows[1]["step"]) - int(rows[0]["step"])
-            if spacing > 0 and (int(rows[-1]["step"]) - int(rows[0]["step"])) % spacing:
+            a, b, c = (int(r["step"]) for r in rows[-3:])
+            if 0 < c - b < b - a:
                 cap_row = sim.history.pop()
                 sim.kinetic_peak = max(sim.kinetic_peak, float(cap_row.get("kinetic_peak", 0.0)))
         return last

@@ -453,7 +453,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         if journal is not None:
             journal.current = None
             sim.caller_checkpoints_interrupts = False
-    wall = wall_before + time.perf_counter() - wall
+    wall_total = wall_before + time.perf_counter() - wall
     reason = status["reason"] or ("completed" if stage.duration is not None else "capped")
     if reason == "capped":
         status["detail"] = f"no rule held within {length:.4g} s ({length / (stretch * T):.3g} response times)"
@@ -461,7 +461,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     row = sim.last_row or {}
     result = StageResult(
         name=stage.name, reason=reason, t_start=t0, t_end=sim.state.time, steps=sim.state.step - step0,
-        wall_seconds=wall, dt=dt, reduction=cracks.interfaces.reduction if cracks is not None else 1.0,
+        wall_seconds=wall_total, dt=dt, reduction=cracks.interfaces.reduction if cracks is not None else 1.0,
         unbalanced_ratio=float(ratio), kinetic_energy=float(row.get("kinetic", 0.0)),
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
