@@ -501,6 +501,12 @@ def start_journal(sim, args, folder=None):
             from fdem.solve.checkpoint import read_checkpoint
 
             last = journal.carry_on(sim, "runout", lambda: read_checkpoint(path.with_name("runout_start.npz"))["state"]["x"])
+            # on disk at once: a carry-on stopped before its first periodic checkpoint (an
+            # instability, a signal) resumes as a carry-on, not as the capped run it began from
+            runtime = dict(journal.resume)
+            journal.current = lambda: runtime
+            journal.write(sim, "carried on")
+            journal.current = None
             say(f"carrying the {last['name']} stage on from t = {sim.state.time:.6g} s to a cap of "
                 f"{args.runout_time:g} s (it ran {last['t_end'] - last['t_start']:.4g} s to its cap)")
         sim.continue_outputs()

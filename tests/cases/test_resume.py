@@ -175,7 +175,20 @@ def test_a_runout_capped_while_moving_is_carried_on_to_rest(uninterrupted, tmp_p
     assert shorter.returncode == 2 and "longer cap" in shorter.stderr
     at_rest = fdem("run", "quick-start", "--resume", str(uninterrupted), "--runout-time", "100")
     assert at_rest.returncode == 2 and "ran to its cap" in at_rest.stderr   # nothing to carry on
-    carried = fdem("run", "quick-start", "--resume", str(out), "--runout-time", "100")
+    # stopped right after it began (SIGTERM at its first rows), the carry-on resumes as a carry-on
+    proc = subprocess.Popen([sys.executable, "-m", "fdem.cli", "run", "quick-start", "--resume", str(out),
+                             "--runout-time", "100"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    saved = out / "checkpoint.npz"
+    t0 = time.monotonic()
+    while proc.poll() is None and time.monotonic() - t0 < 120:
+        if read_checkpoint(saved)["context"].get("why") == "carried on":
+            proc.send_signal(signal.SIGTERM)
+            break
+        time.sleep(0.02)
+    log = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 143, log
+    assert read_checkpoint(saved)["context"]["stage"]["name"] == "runout"  # the carry-on, in progress
+    carried = fdem("run", "quick-start", "--resume", str(out))  # its cap now the run's own
     assert carried.returncode == 0, carried.stdout + carried.stderr
     assert json.loads((out / "run.json").read_text())["argv"][-2:] == ["--runout-time", "100.0"]
     assert_same_run(uninterrupted, out)
