@@ -77,6 +77,33 @@ def locked_now(run: Path, summary: dict) -> dict | None:
     return {k: v for k, v in record.locked(np.asarray(state["x"])).items() if k != "mask"}
 
 
+def redraw_mechanism(run: Path, summary: dict, path: Path) -> Path | None:
+    """``mechanism.png`` of the run drawn again by this code (its locked part by this code's rule,
+    :func:`locked_now`), from the run's mesh and the state its summary was written on; ``None``
+    when either is missing. The run's own picture outlines the locked part by the rule of the
+    commit that drew it."""
+    from fdem.cases import four_slopes
+    from fdem.mesh.mesh import Mesh
+    from fdem.mesh.topology import build_topology
+    from fdem.results.report import RunReport
+    from fdem.solve.checkpoint import load_checkpoint, read_checkpoint
+
+    state_file = run / ("checkpoint.npz" if summary.get("outcome") in STOPPED else "final_state.npz")
+    meshes = sorted(run.glob(f"{summary.get('scene', '')}.npz"))
+    toe = summary.get("toe")
+    if not state_file.is_file() or not meshes or not toe:
+        return None
+    if float(read_checkpoint(state_file)["state"]["time"]) != float(summary.get("simulated_time_s", -1.0)):
+        return None
+    sim, _ = four_slopes.simulation(None, build_topology(Mesh.load(meshes[0])), None, pictures=False, progress=False)
+    report = RunReport(sim, toe_x=float(toe[0]), floor_y=float(toe[1]))  # its motion record, then the saved one
+    load_checkpoint(sim, state_file)
+    try:
+        return report.mechanism_picture(path)
+    finally:
+        sim.close()
+
+
 def _mode(d: dict) -> str:
     m = d.get("broken_by_mode") or d.get("by_mode") or {}
     return f"I {m.get('I', 0)} / II {m.get('II', 0)} / mixed {m.get('mixed', 0)}"
@@ -308,6 +335,9 @@ def main(argv=None) -> list[tuple[str, str]]:
     parser.add_argument("run", type=Path, nargs="?", help="the run's folder (holding summary.json)")
     parser.add_argument("--name", default=None, help="the name in docs/cases/rest (default from the summary)")
     parser.add_argument("--dry-run", action="store_true", help="print the table, copy nothing")
+    parser.add_argument("--redraw-mechanism", action="store_true",
+                        help="draw mechanism.png again with this code (the locked part by this code's rule) "
+                             "instead of copying the run's own")
     parser.add_argument("--overview", action="store_true",
                         help="print one table of every run published in docs/cases/rest, and nothing else")
     args = parser.parse_args(argv)
@@ -344,8 +374,12 @@ def main(argv=None) -> list[tuple[str, str]]:
         except (OSError, ValueError):
             record = {}
         write_json(DOCS / f"{name}_run.json", {**record, "contact_law": law, "last_frame": frame})
+        redrawn = redraw_mechanism(args.run, summary, DOCS / f"{name}_mechanism.png") if args.redraw_mechanism else None
+        if args.redraw_mechanism:
+            print(f"mechanism picture {'drawn again by this code' if redrawn else 'not redrawn (no state or mesh)'}",
+                  file=sys.stderr)
         for pic in PICTURES:
-            if (args.run / f"{pic}.png").exists():
+            if (args.run / f"{pic}.png").exists() and not (pic == "mechanism" and redrawn):
                 shutil.copyfile(args.run / f"{pic}.png", DOCS / f"{name}_{pic}.png")
         print(f"wrote {DOCS.relative_to(ROOT)}/{name}.json and its pictures", file=sys.stderr)
     return rows
