@@ -417,13 +417,21 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) 
     record(run_stage(sim, slide, journal=journal))
 
 
+ESCAPE_SHARE = 0.01
+"""Share of the displaced area that fragments leaving the model may take before a runout ends
+``left_model`` (:attr:`fdem.workflow.stages.Stage.escape_share`): fly-rock is held beyond the
+model's end and the runout goes on; a mass running off the floor ends it."""
+
+
 def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     """The dynamic runout stage of the workflow: no damping, time-step factor
     ``wf.runout_dt_fraction``; ends when the kinetic energy has stayed below
     ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
     ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
     the model height ``H`` [m] under gravity ``g`` [m/s^2]); it stops ``left_model`` when a node
-    runs 1 % of ``H`` beyond the model's initial extent (off the end of the floor). It also ends
+    runs 1 % of ``H`` beyond the model's initial extent (off the end of the floor), unless the
+    fragments beyond are fly-rock: up to :data:`ESCAPE_SHARE` of the displaced area is held
+    there and the runout goes on (:attr:`~fdem.workflow.stages.Stage.escape_share`). It also ends
     at rest when no node has moved more than 1 % of the failure displacement within 5 ``T``
     (:class:`~fdem.workflow.stages.Convergence` ``drift``): a slope that crept and stopped rings
     on at a kinetic energy that never falls to 1 % of its small peak (the high-angle coarse
@@ -433,7 +441,7 @@ def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
                  converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T,
                                       drift=0.01 * fail_displacement, drift_window=5.0 * T),
-                 domain_margin=0.01 * height)
+                 domain_margin=0.01 * height, escape_share=ESCAPE_SHARE)
 
 
 def factor_of_safety_figures(result: dict) -> dict:

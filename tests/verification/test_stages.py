@@ -85,6 +85,54 @@ def test_a_stage_ends_when_material_leaves_the_model():
     assert runout_stage(SlopeWorkflow(), 0.3, 30.0, 9.81).domain_margin == pytest.approx(0.3)
 
 
+def test_fly_rock_is_held_beyond_the_model_and_the_runout_goes_on():
+    """Eight free triangles (no crack elements: each its own fragment, 0.5 m^2) of a 4 m x 1 m
+    strip: one thrown along +x at 2 m/s, the other seven drifting up at 4 m/s (displaced more
+    than 0.1 m after 25 ms). The thrown one crosses the strip's end plus the 0.1 m margin after
+    50 ms. With an escape share of 0.2 (0.8 m^2 of the 4 m^2 displaced) it is held there: the
+    stage runs to its end, the held triangle's nodes stand still from then on, and its kinetic
+    energy (0.5 m v^2 of 2 m/s) leaves as boundary work, the ledger balanced. With a
+    share of 0.05 (0.2 m^2) the same triangle is the mass running off: ``left_model``. (Gravity
+    1e-6 m/s^2 along x: the stage's closing unbalanced-force ratio needs a load to divide by.)"""
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+    from fdem.workflow.stages import HELD
+
+    def strip():
+        topo = build_topology(structured_rectangle(4, 1, 4.0, 1.0))
+        model = Model(topo, ElasticMaterial(young=1e8, poisson=0.25, density=2500.0))
+        model.set_gravity(1e-6, 0.0)  # next to none (the stage's last ratio divides by it)
+        sim = Simulation(model, progress=False)
+        tri = np.asarray(topo.triangles)
+        thrown = int(np.argmax(topo.x0[tri].mean(axis=1)[:, 0]))  # the triangle nearest the +x end
+        sim.state.v[:, 1] = 4.0
+        sim.state.v[tri[thrown]] = (2.0, 0.0)
+        return sim, tri, thrown
+
+    sim, tri, thrown = strip()
+    area = float(sim.model.topology.triangle_area0[thrown])
+    kinetic = 0.5 * float(sim.state.mass[tri[thrown]].sum()) * 4.0
+    stage = Stage("runout", duration=1.0, check_interval=0.01, domain_margin=0.1, escape_share=0.2)
+    r = run_stage(sim, stage, frames=False)
+    assert r.reason == "completed" and "1 triangle(s) of fragments that left the model" in r.detail
+    assert np.all(sim.flags[tri[thrown]] == HELD) and np.all(sim.state.v[tri[thrown]] == 0.0)
+    assert 4.1 < sim.state.x[tri[thrown], 0].max() < 4.1 + 2.0 * 0.011  # held within a check of the margin
+    row = sim.history[-1]
+    assert row["boundary_work"] == pytest.approx(-kinetic, rel=1e-5)   # its kinetic energy, taken out
+    assert row["balance_error_relative"] < 1e-9
+    assert area == pytest.approx(0.5)
+    sim, tri, thrown = strip()
+    r = run_stage(sim, Stage("runout", duration=1.0, check_interval=0.01, domain_margin=0.1, escape_share=0.05),
+                  frames=False)
+    assert r.reason == "left_model"
+    with pytest.raises(ValueError, match="escape_share"):
+        Stage("x", duration=1.0, escape_share=0.5)   # no margin to escape past
+    assert runout_stage(SlopeWorkflow(), 0.3, 30.0, 9.81).escape_share == pytest.approx(0.01)
+
+
 def test_a_trial_stage_keeps_its_time_step_factor():
     from fdem.workflow.fos import _trial_stage_at
 
