@@ -223,10 +223,13 @@ def _check_carry_on(parser, folder: Path, argv) -> None:
         stages = json.loads((folder / "summary.json").read_text())["workflow"]["stages"]
     except (OSError, ValueError, KeyError, TypeError):
         parser.error(f"--resume {folder} {CARRY_ON_OPTION}: no summary.json with the run's stages there")
+    from fdem.workflow.journal import CARRIED_ENDINGS
+
     last = stages[-1] if stages else {}
-    if not str(last.get("name", "")).startswith("runout") or last.get("reason") != "capped":
+    if not str(last.get("name", "")).startswith("runout") or last.get("reason") not in CARRIED_ENDINGS:
         parser.error(f"--resume {folder} {CARRY_ON_OPTION}: the run's last stage is {last.get('name')!r}, which "
-                     f"ended {last.get('reason')!r}; only a runout that ran to its cap can be carried on")
+                     f"ended {last.get('reason')!r}; only a runout that ran to its cap (or off the model) can be "
+                     f"carried on")
     ran = float(last["t_end"]) - float(last["t_start"])
     if not cap > ran:
         parser.error(f"--resume {folder} {CARRY_ON_OPTION} {text}: the runout already ran {ran:.4g} s; give a "

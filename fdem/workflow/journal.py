@@ -31,6 +31,12 @@ __all__ = ["CHECKPOINT_NAME", "CAPPED_MARK", "RunJournal"]
 CHECKPOINT_NAME = "checkpoint.npz"
 """The journal's checkpoint file in a run's output folder."""
 
+CARRIED_ENDINGS = ("capped", "left_model")
+"""Endings of a last stage that :meth:`RunJournal.carry_on` takes back into progress: its cap, and
+the model's end (a runout ended by fly-rock before fragments leaving the model were held beyond
+it, :attr:`fdem.workflow.stages.Stage.escape_share`: carried on, the fragment is held at the
+first check and the runout goes on)."""
+
 CAPPED_MARK = "capped_stage_runtime"
 """The journal mark holding the runtime of a last stage that ran to its cap (:meth:`RunJournal.carry_on`)."""
 
@@ -111,9 +117,9 @@ class RunJournal:
         if not self.done:
             raise ValueError("the run finished no stage: there is nothing to carry on")
         last = self.done[-1]
-        if not str(last["name"]).startswith(prefix) or last["reason"] != "capped":
+        if not str(last["name"]).startswith(prefix) or last["reason"] not in CARRIED_ENDINGS:
             raise ValueError(f"the run's last stage is {last['name']!r}, which ended {last['reason']!r}: only a "
-                             f"{prefix} stage that ran to its cap can be carried on")
+                             f"{prefix} stage that ran to its cap, or off the model, can be carried on")
         runtime = self.marks.pop(CAPPED_MARK, None)
         if runtime is None or runtime.get("name") != last["name"]:
             runtime = {"name": last["name"], "t0": float(last["t_start"]), "dt": float(last["dt"]),
