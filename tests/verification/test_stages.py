@@ -241,17 +241,16 @@ def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibr
         factor_of_safety(sim, workers=2)
 
 
-def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
-    """A bisection of hours must not be lost to the end of a session. Killed halfway through its
-    third trial (no handler runs: the checkpoint on disk is the one written after the second),
-    the run resumes on a freshly built simulation, runs only the trials not yet finished, and
-    ends as a search never cut: the same trials, verdicts and bracket, the same final state to
-    the bit after the stage that follows, and the same history.csv."""
-    from fdem.solve.checkpoint import read_checkpoint
+def _search_killed_in_its_third_trial(tmp_path, monkeypatch, every_seconds=None):
+    """The planar slope's workflow (a search over 1.0-2.0 to 0.1, then a step that holds) run whole
+    into ``tmp_path/whole``, then again into ``tmp_path/cut`` with a journal (periodic checkpoints
+    every ``every_seconds``) and killed on the fifth row of its third trial, as a SIGKILL would
+    (no handler runs). Returns ``(wf, whole summary, whole sim, factors of the cut run's trials,
+    the cut run's folder, the real _run_trial)``."""
     from fdem.workflow import fos as fos_module
     from fdem.workflow.journal import RunJournal
 
-    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))  # the search, then a step that holds
+    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))
     whole_sim = planar_slope_scene(out_dir=tmp_path / "whole", pictures=False).sim
     whole = run_slope_workflow(whole_sim, wf)
     whole_sim.close()
@@ -263,7 +262,7 @@ def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monke
 
     def killed_in_the_third(sim, *args, **kwargs):
         calls.append(args[2])
-        if len(calls) == 3:  # partway through its steps, as a SIGKILL would
+        if len(calls) == 3:  # partway through its steps
             record_row = sim._record_row
 
             def dies_on_the_fifth_row(*a, **k):
@@ -278,8 +277,37 @@ def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monke
     out = tmp_path / "cut"
     cut_sim = planar_slope_scene(out_dir=out, pictures=False).sim
     with pytest.raises(Killed):
-        run_slope_workflow(cut_sim, wf, journal=RunJournal(out / "checkpoint.npz"))
+        run_slope_workflow(cut_sim, wf, journal=RunJournal(out / "checkpoint.npz", every_seconds=every_seconds))
     cut_sim.close()
+    return wf, whole, whole_sim, calls, out, run_trial
+
+
+def _assert_same_search(whole, whole_sim, resumed, sim, whole_dir, resumed_dir):
+    """A resumed run ended as the run never cut: the same trials, verdicts, bracket and failure
+    surface, the same stages, the same state to the bit (crack elements too), the same history.csv."""
+    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
+    assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
+    assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
+    assert resumed["fos"]["failure_broken_elements"] == whole["fos"]["failure_broken_elements"]
+    assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
+        [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
+    a, b = whole_sim.state_dict(), sim.state_dict()
+    assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
+    assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
+    assert (whole_dir / "history.csv").read_bytes() == (resumed_dir / "history.csv").read_bytes()
+
+
+def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
+    """A bisection of hours must not be lost to the end of a session. Killed halfway through its
+    third trial (no handler runs: the checkpoint on disk is the one written after the second),
+    the run resumes on a freshly built simulation, runs only the trials not yet finished, and
+    ends as a search never cut: the same trials, verdicts and bracket, the same final state to
+    the bit after the stage that follows, and the same history.csv."""
+    from fdem.solve.checkpoint import read_checkpoint
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.journal import RunJournal
+
+    wf, whole, whole_sim, calls, out, run_trial = _search_killed_in_its_third_trial(tmp_path, monkeypatch)
     saved = read_checkpoint(out / "checkpoint.npz")["context"]["marks"][fos_module.TRIALS_MARK]["trials"]
     assert [t["factor"] for t in saved] == calls[:2] == [t["factor"] for t in whole["fos"]["trials"][:2]]
 
@@ -291,16 +319,7 @@ def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monke
     resumed = run_slope_workflow(sim, wf, journal=journal)
     sim.close()
     assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]   # only the trials not yet finished
-    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
-    assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
-    assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
-    assert resumed["fos"]["failure_broken_elements"] == whole["fos"]["failure_broken_elements"]
-    assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
-        [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
-    a, b = whole_sim.state_dict(), sim.state_dict()
-    assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
-    assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
-    assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
+    _assert_same_search(whole, whole_sim, resumed, sim, tmp_path / "whole", out)
     assert fos_module.TRIALS_MARK not in journal.marks  # a finished search leaves only its result behind
 
 
@@ -317,35 +336,8 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     from fdem.workflow import fos as fos_module
     from fdem.workflow.journal import RunJournal
 
-    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))
-    whole_sim = planar_slope_scene(out_dir=tmp_path / "whole", pictures=False).sim
-    whole = run_slope_workflow(whole_sim, wf)
-    whole_sim.close()
-    run_trial = fos_module._run_trial
-    calls = []
-
-    class Killed(Exception):
-        pass
-
-    def killed_in_the_third(sim, *args, **kwargs):
-        calls.append(args[2])
-        if len(calls) == 3:
-            record_row = sim._record_row
-
-            def dies_on_the_fifth_row(*a, **k):
-                if sum(1 for r in sim.history if r["stage"].startswith("trial")) >= 5:
-                    raise Killed
-                return record_row(*a, **k)
-
-            monkeypatch.setattr(sim, "_record_row", dies_on_the_fifth_row)
-        return run_trial(sim, *args, **kwargs)
-
-    monkeypatch.setattr(fos_module, "_run_trial", killed_in_the_third)
-    out = tmp_path / "cut"
-    cut_sim = planar_slope_scene(out_dir=out, pictures=False).sim
-    with pytest.raises(Killed):
-        run_slope_workflow(cut_sim, wf, journal=RunJournal(out / "checkpoint.npz", every_seconds=1e-9))
-    cut_sim.close()
+    wf, whole, whole_sim, calls, out, run_trial = _search_killed_in_its_third_trial(tmp_path, monkeypatch,
+                                                                                    every_seconds=1e-9)
     third = whole["fos"]["trials"][2]
     context = read_checkpoint(out / "checkpoint.npz")["context"]
     assert context["stage"]["name"] == f"trial_F{third['factor']:.4f}"   # inside the third trial
@@ -380,16 +372,7 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     sim.close()
     assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]
     assert 0 < resumed_steps[0] < third["steps"]   # the third trial went on, it did not start again
-    key = lambda t: (t["factor"], t["stable"], t["steps"], t["reason"], t["max_displacement"])  # noqa: E731
-    assert [key(t) for t in resumed["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
-    assert resumed["fos"]["bracket"] == whole["fos"]["bracket"]
-    assert resumed["fos"]["failure_broken_elements"] == whole["fos"]["failure_broken_elements"]
-    assert [(st["name"], st["reason"], st["steps"]) for st in resumed["stages"]] == \
-        [(st["name"], st["reason"], st["steps"]) for st in whole["stages"]]
-    a, b = whole_sim.state_dict(), sim.state_dict()
-    assert np.array_equal(a["x"], b["x"]) and np.array_equal(a["v"], b["v"])
-    assert all(np.array_equal(a["providers"][0][k], b["providers"][0][k]) for k in ("state", "diss", "broken"))
-    assert (tmp_path / "whole" / "history.csv").read_bytes() == (out / "history.csv").read_bytes()
+    _assert_same_search(whole, whole_sim, resumed, sim, tmp_path / "whole", out)
 
     # resumed from that state, the search starts from its own start state (fos_start.npz), not
     # from the trial's: the third trial begins again and the run ends as the uncut one
@@ -400,10 +383,7 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     sim.continue_outputs()
     again = run_slope_workflow(sim, wf, journal=journal)
     sim.close()
-    assert [key(t) for t in again["fos"]["trials"]] == [key(t) for t in whole["fos"]["trials"]]
-    c = sim.state_dict()
-    assert np.array_equal(a["x"], c["x"]) and np.array_equal(a["v"], c["v"])
-    assert (tmp_path / "whole" / "history.csv").read_bytes() == (early / "history.csv").read_bytes()
+    _assert_same_search(whole, whole_sim, again, sim, tmp_path / "whole", early)
 
 
 def test_a_checkpoint_inside_a_trial_is_refused_by_a_search_that_cannot_go_on_with_it(tmp_path):
