@@ -337,6 +337,8 @@ def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> N
         stage = dataclasses.replace(stage, name=stage.name + suffix)
     runout = record(run_stage(sim, stage, journal=journal))
     summary["outcome"] = "failed"
+    # this runout's end, not an earlier creep's (the reduction carried on from a slope at rest)
+    summary["ending"] = f"failed at F = {F:.4g}; the runout ended {runout.reason} at t = {runout.t_end:.4g} s ({runout.detail})"
     if runout.reason == "left_model":
         summary["ending"] = (f"the failed mass ran off the end of the model at t = {runout.t_end:.4g} s ({runout.detail}): "
                              f"the runout distance is a lower bound; lengthen the floor in front of the toe")
