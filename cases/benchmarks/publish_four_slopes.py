@@ -287,7 +287,9 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
     off = run.get("off_model_area_m2") or 0.0
     rows.append(("runout beyond the toe", f"{run.get('runout_distance_m', 0):.3g} m (99th percentile by area), front "
                                           f"{run.get('runout_front_max_m', 0):.3g} m"
-                                          + (f"; {off:.3g} m^2 left the model: a lower bound" if off > 0 else "")))
+                                          + ((f"; {off:.3g} m^2 of fly-rock left the model: the front is a lower bound"
+                                              if off < 0.01 * run.get("displaced_area_m2", 0.0)
+                                              else f"; {off:.3g} m^2 left the model: a lower bound") if off > 0 else "")))
     areas = summary.get("displaced_area_m2") or (frame or {}).get("areas") or {}
     rows.append(("volume", f"{run.get('displaced_area_m2', 0):.3g} m^2 displaced more than 0.1 m (per metre)"
                  + (f"; {areas['1']:.3g} m^2 more than 1 m, {areas['10']:.3g} m^2 more than 10 m" if areas else "")))

@@ -184,8 +184,13 @@ class RunReport:
                            else events.compare_with_reference(mags, self.reference_events)),
             "ledger_error_relative": float(hist[-1]["balance_error_relative"]) if hist else 0.0,
         }
-        if run["off_model_area_m2"] > 0.0:  # the floor ended under the debris: the distance is cut
-            out["caveats"] = [f"{run['off_model_area_m2']:.3g} m^2 of the failed mass ran off the end of the model, "
+        off = run["off_model_area_m2"]
+        if off > 0.0 and off < 0.01 * run["displaced_area_m2"]:  # fly-rock, held beyond the floor's end
+            out["caveats"] = [f"{off:.3g} m^2 of fragments ran off the end of the model, beyond its initial x range "
+                              f"(fly-rock, under 1 % of the displaced area): the front distance is a lower bound, "
+                              f"the runout distance (99th percentile by area) is not"]
+        elif off > 0.0:  # the floor ended under the debris: the distance is cut
+            out["caveats"] = [f"{off:.3g} m^2 of the failed mass ran off the end of the model, "
                               f"beyond its initial x range: the runout distance is a lower bound; lengthen the "
                               f"floor in front of the toe"]
         if extra:
