@@ -57,6 +57,10 @@ def main(argv=None) -> int:
     ap.add_argument("--ramp", type=float, default=None, metavar="F",
                     help="a stop rule that sets the strength reduction to F at the first history row after "
                          "step 40, during the run (as the paper's reduction rate does)")
+    ap.add_argument("--hold", action="store_true",
+                    help="a stop rule that holds the nodes of the three triangles highest in the block (both "
+                         "velocity components prescribed zero) at the first history row after step 50, as a "
+                         "runout holds fly-rock beyond the model (fdem.workflow.stages.hold_escaped)")
     ap.add_argument("--bare", type=int, default=0, metavar="N",
                     help="N bare Simulation.step calls before the run, all inside one device_session")
     args = ap.parse_args(argv)
@@ -71,9 +75,15 @@ def main(argv=None) -> int:
     if args.quasi_static:
         sim.set_density_scaling(True)
         damping = Damping(mass_proportional=200.0, local=0.3)
+    tri = np.asarray(sim.model.topology.triangles)
+    top = tri[np.argsort(sim.model.topology.x0[tri].mean(axis=1)[:, 1])[-3:]].ravel()
+
     def ramp(s) -> bool:
         if args.ramp is not None and s.state.step > 40 and cracks.interfaces.reduction != args.ramp:
             cracks.interfaces.set_reduction(args.ramp)
+        if args.hold and s.state.step > 50 and not (s.flags[top] == 3).all():
+            s.flags[top] = 3
+            s.v_prescribed[top] = 0.0
         return False
 
     with sim.device_session():
@@ -81,10 +91,11 @@ def main(argv=None) -> int:
             sim.step(damping or Damping())
         done = sim.state.step
         sim.run(n_steps=args.steps - done, phase=done, history_every=HISTORY_EVERY, energy_tolerance=None,
-                stage="shear", damping=damping, stop_when=ramp if args.ramp is not None else None)
+                stage="shear", damping=damping, stop_when=ramp if args.ramp is not None or args.hold else None)
     if args.save:
         ck.save_checkpoint(sim, args.save)
     result = outcome(sim, cracks, contact)
+    result["held_speed"] = np.array(np.abs(sim.state.v[top]).max())
     dev = sim._device
     result["batches"] = np.array([dev.batches_run, dev.batches_refused] if dev is not None else [0, 0])
     result["device_searches"] = np.array(dev.device_searches if dev is not None else 0)

@@ -64,13 +64,16 @@ def _cpu(*args) -> None:
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cuda")
     f = {name: tmp / f"{name}.npz" for name in ("ck50", "ck62g", "ref24", "ref62", "ref70", "gpu24", "gpu62",
-                                                 "cpu70", "cpu50", "qs56", "gqs56", "ramp58", "gramp58", "bare", "gbare")}
+                                                 "cpu70", "cpu50", "qs56", "gqs56", "ramp58", "gramp58", "bare", "gbare",
+                                                 "hold58", "ghold58")}
     _cpu(f["cpu50"], "--steps", CHECKPOINT, "--save", f["ck50"])
     _gpu(f["gpu62"], "--steps", GPU_END, "--from", f["ck50"], "--save", f["ck62g"], tmp=tmp)
     _cpu(f["cpu70"], "--steps", CPU_END, "--from", f["ck62g"])
     _gpu(f["gpu24"], "--steps", 24, "--softening", "all", tmp=tmp)
     _gpu(f["gramp58"], "--steps", 58, "--from", f["ck50"], "--ramp", 1.6, tmp=tmp)
     _cpu(f["ramp58"], "--steps", 58, "--from", f["ck50"], "--ramp", 1.6)
+    _gpu(f["ghold58"], "--steps", 58, "--from", f["ck50"], "--hold", tmp=tmp)
+    _cpu(f["hold58"], "--steps", 58, "--from", f["ck50"], "--hold")
     _gpu(f["gbare"], "--steps", 8, "--bare", 3, tmp=tmp)
     _cpu(f["bare"], "--steps", 8, "--bare", 3)
     _gpu(f["gqs56"], "--steps", 56, "--from", f["ck50"], "--quasi-static", tmp=tmp)
@@ -128,6 +131,16 @@ def test_a_stop_rule_that_changes_the_strength_mid_run_reaches_the_gpu(runs):
     the change must reach the device at once (here F = 1.25 -> 1.6 at the step-50 row)."""
     assert float(runs["gramp58"]["reduction"]) == float(runs["ramp58"]["reduction"]) == 1.6
     assert_same_run(runs["gramp58"], runs["ramp58"])
+
+
+def test_a_stop_rule_that_holds_nodes_mid_run_reaches_the_gpu(runs):
+    """A runout holds fly-rock from its stop rule (``hold_escaped``: both velocity components
+    prescribed zero): the held nodes must stop on the device at once, the support's reaction
+    booked as on the CPU (here the three highest triangles of the thrown block, held at the row
+    of step 51 and carried to step 58)."""
+    for run in (runs["ghold58"], runs["hold58"]):
+        assert float(run["held_speed"]) == 0.0
+    assert_same_run(runs["ghold58"], runs["hold58"])
 
 
 def test_gpu_quasi_static_stage(runs):
