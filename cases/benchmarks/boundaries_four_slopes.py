@@ -3,17 +3,19 @@ and with intact side bands, each a bisection from the equilibrium state.
 
 A model is far enough from its boundaries when a wider one gives the same bracket and the same
 mechanism. Each variant is one ``fdem run four-slopes`` run in ``<root>/<angle>_<spacing>[_crest<C>]
-[_band<B>]`` (crest plateau ``C`` m, folder suffix when not 30 m; joints kept ``B`` m off the
-left and right rollers; floor 45 m and base 15 m in every variant), started, resumed from its checkpoint, or, when its ``summary.json``
+[_band<B>][_elastic]`` (crest plateau ``C`` m, folder suffix when not 30 m; joints kept ``B`` m off the
+left and right rollers, those bands elastic with ``_elastic``; floor 45 m and base 15 m in every variant), started, resumed from its checkpoint, or, when its ``summary.json``
 exists, only read, one Numba thread each. The table is printed and written to
 ``docs/cases/four_slopes_boundaries.json``; the pictures of each variant's first failing trial
 (``fos_failure.png``) show its mechanism.
 
     python cases/benchmarks/boundaries_four_slopes.py --scene low:fine --variants 30 60 90 60:5 --root runs/bnd
     python cases/benchmarks/boundaries_four_slopes.py --scene high:fine --variants 30 30:5 60:5 --fos 1.0 3.0 0.04 --root runs/bnd
+    python cases/benchmarks/boundaries_four_slopes.py --scene high:fine --variants 30:5:elastic --fos 1.5 2.0 0.02 --root runs/bnd
     python cases/benchmarks/boundaries_four_slopes.py --root runs/bnd --table-only
 
-A variant is ``CREST`` or ``CREST:BAND`` in metres.
+A variant is ``CREST`` or ``CREST:BAND`` in metres, or ``CREST:BAND:elastic`` for side bands whose
+crack elements never soften or break (``fdem run four-slopes --elastic-band``).
 """
 from __future__ import annotations
 
@@ -38,26 +40,32 @@ from fdem.cases.four_slopes import EXTENTS_BEFORE_PINNING as BASE_EXTENTS  # noq
 DEFAULT_CREST = BASE_EXTENTS["crest_length"]
 
 
-def parse_variant(text: str) -> tuple[float, float | None]:
-    """``"60"`` -> (60.0, None); ``"60:5"`` -> (60.0, 5.0)."""
-    crest, _, band = text.partition(":")
-    c, b = float(crest), (float(band) if band else None)
-    if not c > 0 or (b is not None and not b > 0):
-        raise ValueError(f"a variant is CREST or CREST:BAND with positive metres, got {text!r}")
-    return c, b
+def parse_variant(text: str) -> tuple[float, float | None, bool]:
+    """``"60"`` -> (60.0, None, False); ``"60:5"`` -> (60.0, 5.0, False); ``"60:5:elastic"`` ->
+    (60.0, 5.0, True)."""
+    crest, _, rest = text.partition(":")
+    band, _, law = rest.partition(":")
+    try:
+        c, b = float(crest), (float(band) if band else None)
+    except ValueError:
+        c = b = float("nan")
+    if not c > 0 or (b is not None and not b > 0) or law not in ("", "elastic") or (law and b is None):
+        raise ValueError(f"a variant is CREST, CREST:BAND or CREST:BAND:elastic with positive metres, got {text!r}")
+    return c, b, law == "elastic"
 
 
-def folder(root: Path, angle: str, spacing: str, crest: float, band: float | None) -> Path:
+def folder(root: Path, angle: str, spacing: str, crest: float, band: float | None, elastic: bool = False) -> Path:
     name = f"{angle}_{spacing}"
     if crest != DEFAULT_CREST:
         name += f"_crest{crest:g}"
     if band is not None:
-        name += f"_band{band:g}"
+        name += f"_band{band:g}" + ("_elastic" if elastic else "")
     return root / name
 
 
 def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: float | None, fos,
-            toe: float = BASE_EXTENTS["toe_length"], base: float = BASE_EXTENTS["base_depth"]) -> list[str]:
+            toe: float = BASE_EXTENTS["toe_length"], base: float = BASE_EXTENTS["base_depth"],
+            elastic: bool = False) -> list[str]:
     """Every extent named, so that the variants differ in the crest and the bands alone (the
     case's own defaults differ by angle)."""
     exe = [sys.executable, "-c", "import sys; from fdem.cli import main; sys.exit(main())", "run", "four-slopes"]
@@ -65,7 +73,7 @@ def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: 
         return exe + ["--resume", str(out)]
     argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
                   "--crest-length", f"{crest:g}", "--toe-length", f"{toe:g}", "--base-depth", f"{base:g}",
-                  "--boundary-band", f"{band or 0:g}"]
+                  "--boundary-band", f"{band or 0:g}"] + (["--elastic-band"] if elastic else [])
     # only the bracket and its mechanism matter here: a short runout
     return argv + ["--runout-time", "0.5", "--threads", "1", "--quiet", "--yes", "--out", str(out)]
 
@@ -81,6 +89,7 @@ def row(summary: dict, fos_json: dict | None) -> dict:
         "scene": summary.get("scene"), "size_m": summary.get("size_m"), "n_triangles": summary.get("n_triangles"),
         "crest_length_m": ext.get("crest_length"), "toe_length_m": ext.get("toe_length"),
         "side_band_m": ext.get("boundary_band"),
+        "side_bands": summary.get("side_bands") or ("rock" if ext.get("boundary_band") else None),
         "equilibrium": eq.get("reason"), "broken_at_F1": eq.get("n_broken"),
         "failed_at_F1": summary.get("failed_at_factor") == 1.0,
         "fos": fos.get("fos"), "bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
@@ -120,13 +129,15 @@ def table(root: Path) -> list[dict]:
             with np.load(folder / f"{scene}.npz") as mesh:
                 n_triangles = int(mesh["triangles"].shape[0])
             s = {"case": "four-slopes", "scene": scene, "size_m": float(opt.get("--size", 0.5)),
-                 "n_triangles": n_triangles, "workflow": {"fos": fos_json, "stages": []}, "outcome": "running"}
+                 "n_triangles": n_triangles, "workflow": {"fos": fos_json, "stages": []}, "outcome": "running",
+                 "side_bands": "elastic" if "--elastic-band" in argv else None}
         else:
             continue
         if not (s.get("extents_m") or {}).get("toe_length"):  # summaries of older runs do not name them all
             s["extents_m"] = extents_from_command(folder)
         rows.append({**row(s, fos_json), "folder": str(folder)})
-    rows.sort(key=lambda r: (r["scene"] or "", r["size_m"] or 0, r["crest_length_m"] or 0, r["side_band_m"] or 0))
+    rows.sort(key=lambda r: (r["scene"] or "", r["size_m"] or 0, r["crest_length_m"] or 0, r["side_band_m"] or 0,
+                             r["side_bands"] or ""))
     return rows
 
 
@@ -138,7 +149,8 @@ def print_table(rows: list[dict]) -> None:
         bracket = ("fails at F = 1" if r["failed_at_F1"] else
                    f"{'-' if b[0] is None else format(b[0], '.4g')}-{'-' if b[1] is None else format(b[1], '.4g')}")
         print(f"| {r['scene']} | {r['size_m']} m | {r['crest_length_m']:g} m | {r['toe_length_m']:g} m | "
-              f"{'-' if r['side_band_m'] is None else format(r['side_band_m'], 'g') + ' m'} | {r['n_triangles']} | "
+              f"{'-' if r['side_band_m'] is None else format(r['side_band_m'], 'g') + ' m'}"
+              f"{' (elastic)' if r['side_bands'] == 'elastic' else ''} | {r['n_triangles']} | "
               f"{r['broken_at_F1']} | {'-' if r['fos'] is None else format(r['fos'], '.3f')} | "
               f"{bracket} | "
               f"{r['wall_seconds']:.0f} s |")
@@ -165,11 +177,11 @@ def main(argv=None) -> list[dict]:
     if not (0 < lo < hi and 0 < tol < hi - lo):
         parser.error(f"--fos needs 0 < LOWER < UPPER and 0 < TOL < UPPER - LOWER, got {args.fos}")
     if not args.table_only:
-        for crest, band in variants:
-            out = folder(args.root, angle, spacing, crest, band)
+        for crest, band, elastic in variants:
+            out = folder(args.root, angle, spacing, crest, band, elastic)
             if finished(out):
                 continue
-            argv_run = command(out, angle, spacing, args.size, crest, band, args.fos)
+            argv_run = command(out, angle, spacing, args.size, crest, band, args.fos, elastic=elastic)
             out.parent.mkdir(parents=True, exist_ok=True)
             print(" ".join(argv_run[3:]), flush=True)
             with open(out.parent / f"{out.name}.log", "a") as log:

@@ -47,7 +47,7 @@ from fdem.geometry.polygons import ground_surface, simple_slope
 from fdem.physics.crack_properties import CrackProperties
 from fdem.io.jsonable import write_json
 
-__all__ = ["four_slope_property_sets", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
+__all__ = ["four_slope_property_sets", "ELASTIC_BAND", "elastic_band_properties", "side_band_tags", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
            "ground_surface", "simulation", "scene", "main", "YOUNG", "POISSON", "DENSITY"]
 
@@ -66,6 +66,38 @@ def four_slope_property_sets() -> dict[int, CrackProperties]:
         1: CrackProperties(f_t=10e3, c=50e3, phi=11.0, G_I=13.0, G_II=130.0,
                            name="DFN joints", **common),
     }
+
+
+ELASTIC_BAND = 2
+"""Crack-set tag of the intact crack elements inside elastic side bands (``--elastic-band``);
+the model's own tags (pictures, summaries) keep them intact rock, tag 0."""
+
+
+def elastic_band_properties() -> CrackProperties:
+    """The intact rock's crack elements with strengths no stress in these slopes reaches: the same
+    penalties (so the band is as stiff as the rock beside it), tensile strength and cohesion
+    1e12 Pa, fracture energies 1e15 J/m^2. Under any reduction factor F they stay elastic, so a
+    band of them is a far field that carries the roller's load without softening or breaking:
+    the boundary cannot join the mechanism (``docs/cases.md`` A, "Boundaries")."""
+    import dataclasses
+
+    return dataclasses.replace(four_slope_property_sets()[INTACT], f_t=1e12, c=1e12, G_I=1e15, G_II=1e15,
+                               name="elastic side bands")
+
+
+def side_band_tags(topology, band: float) -> np.ndarray:
+    """(n_cracks,) crack tags for a crack set with elastic side bands: ``topology.crack_tag``
+    with every intact element (tag 0) whose reference midpoint lies within ``band`` [m] of the
+    model's left or right side (its smallest or largest node x) moved to :data:`ELASTIC_BAND`.
+    Joints are kept out of the bands by the geometry (:class:`fdem.geometry.joint_sets.BandedSet`)."""
+    if not (math.isfinite(band) and band > 0):
+        raise ValueError(f"an elastic side band needs a positive width [m], got {band!r}")
+    x0 = np.asarray(topology.x0, float)
+    mid_x = x0[np.asarray(topology.crack_nodes)[:, :2], 0].mean(axis=1)
+    tag = np.asarray(topology.crack_tag, dtype=np.int32).copy()
+    side = (mid_x < x0[:, 0].min() + band) | (mid_x > x0[:, 0].max() - band)
+    tag[side & (tag == INTACT)] = ELASTIC_BAND
+    return tag
 
 
 FOUR_SLOPE_HEIGHT = 15.0
@@ -214,8 +246,12 @@ def _tell_start_against_final_strength(cracks, geometry, workflow, tensile: str)
 
 
 def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, start: str = "static",
-               progress: bool = True):
+               progress: bool = True, elastic_band: float | None = None):
     """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity.
+
+    ``elastic_band`` [m]: the intact crack elements within that distance of the left and right
+    sides never soften or break (:func:`side_band_tags`, :func:`elastic_band_properties`); the
+    geometry's side bands (``boundary_band``) keep the joints out of the same width.
 
     ``start="static"`` (default) puts it in static equilibrium with pre-loaded crack elements
     (:func:`fdem.solve.geostatic.geostatic_start`); ``"k0"`` gives the triangles the approximate
@@ -234,7 +270,16 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     model.fix("bottom")
     model.roller("left", "x")
     model.roller("right", "x")
-    cracks = CrackSet(topology, four_slope_property_sets(), contact_penalty=CONTACT_PENALTY)
+    sets, crack_topology = four_slope_property_sets(), topology
+    if elastic_band:
+        import dataclasses
+
+        sets[ELASTIC_BAND] = elastic_band_properties()
+        crack_topology = dataclasses.replace(topology, crack_tag=side_band_tags(topology, elastic_band))
+    cracks = CrackSet(crack_topology, sets, contact_penalty=CONTACT_PENALTY)
+    # The crack set keeps the tags it was built with (its own ``tag``); the topology it shares
+    # with the model keeps the geometry's, so pictures and summaries count the bands as intact rock.
+    cracks.topology = topology
     if start == "static":
         geostatic_start(model, cracks)
     elif start == "k0":
@@ -308,6 +353,10 @@ def main(argv=None) -> dict:
                         help=f"keep the joints out of bands of intact rock this wide along the left and right "
                              f"boundaries, so that slip at the rollers is not part of the mechanism (default: none "
                              f"low angle, {high['boundary_band']:g} high angle; 0 for none)")
+    parser.add_argument("--elastic-band", action="store_true",
+                        help="make the side bands elastic: their crack elements never soften or break, a far "
+                             "field that carries the rollers' load, instead of intact rock with its strength "
+                             "(shows whether the boundaries take part; needs a band)")
     parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
                         help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
     parser.add_argument("--tensile", choices=["reduced", "kept"], default=None,
@@ -353,6 +402,9 @@ def main(argv=None) -> dict:
                                   began_with if resuming else None)
     except ValueError as err:
         parser.error(str(err))
+    if args.elastic_band and extents["boundary_band"] is None:
+        parser.error("--elastic-band makes the side bands elastic, and this run has none: give --boundary-band "
+                     "METRES (the high angle has 5 m by default)")
     if not resuming:
         pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
@@ -370,6 +422,9 @@ def main(argv=None) -> dict:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
     except ValueError:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
+    if args.write_scene is not None and args.elastic_band:
+        parser.error("--elastic-band is not part of the scene format yet: run the case itself "
+                     "(fdem run four-slopes ... --elastic-band)")
     if args.write_scene is not None:
         return write_case_scene(parser, NAME, scene(args.angle, spacing, args.size, args.refine, args.joint_offset,
                                                     workflow, extents, tensile), args.write_scene, argv)
@@ -418,11 +473,13 @@ def main(argv=None) -> dict:
     joint_offset = args.joint_offset if args.joint_offset is not None else 0.5 if spacing == "coarse" else 0.0
     summary = {"case": NAME, "scene": name, "size_m": args.size, "joint_offset": joint_offset, "tensile": tensile,
                "extents_m": dict(extents),
+               "side_bands": None if extents["boundary_band"] is None else "elastic" if args.elastic_band else "rock",
                "n_triangles": topo.n_triangles, "threads": threads, "seconds_mesh_and_topology": elapsed, "n_crack_elements": topo.n_cracks,
                "n_joint_crack_elements": int((topo.crack_tag > 0).sum()), "quality": report.as_dict()}
 
     if args.max_steps != 0:
-        sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet)
+        sim, cracks = simulation(geometry, topo, out, pictures=not args.no_pictures, progress=not args.quiet,
+                                 elastic_band=extents["boundary_band"] if args.elastic_band else None)
         cracks.interfaces.reduce_tensile = tensile == "reduced"
         summary["start_at_final_factor"] = _tell_start_against_final_strength(cracks, geometry, workflow, tensile)
         stop_cleanly_on_signals()  # after meshing: Gmsh installs its own handlers

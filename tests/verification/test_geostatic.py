@@ -302,3 +302,45 @@ def test_the_papers_schedule_end_puts_level_ground_beyond_strength():
     at_one = start_against_strength(cracks, slope, 1.0)
     ids = np.union1d(*(crack_strength_check(cracks, cracks.preload_forces, reduction=1.0)[k] for k in ("tensile", "shear")))
     assert not persistent[ids].any() and at_one["factor"] == 1.0
+
+
+def test_elastic_side_bands_carry_the_rollers_load_and_never_yield():
+    """``--elastic-band``: the intact crack elements within the band of either side (and only
+    they: the bands hold no joints) get strengths no stress reaches and the rock's penalties.
+    The static start is then the same to the last bit (the band is as stiff as the rock), yet at
+    the paper's F = 3.33 with f_t kept, where the start is beyond strength in rock bands of the
+    high-angle slope, no element of an elastic band is, and none leaves its elastic range in 400
+    undamped steps, while those of the rock band do. The model's own tags (pictures, summaries)
+    keep the bands intact rock."""
+    from fdem.cases import four_slopes as fs
+    from fdem.solve.damping import NO_DAMPING
+    from fdem.workflow.stages import Stage, run_stage
+
+    extents = fs.resolve_extents("high", {k: None for k in fs.EXTENTS_BEFORE_PINNING}, None)
+    band = extents["boundary_band"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geometry, _, topo = fs.build("high", "coarse", 1.5, None, None, extents=extents)
+    x0, cn = np.asarray(topo.x0), np.asarray(topo.crack_nodes)
+    mid_x = x0[cn[:, :2], 0].mean(axis=1)
+    in_band = (mid_x < x0[:, 0].min() + band) | (mid_x > x0[:, 0].max() - band)
+    assert not (in_band & (topo.crack_tag > 0)).any()              # BandedSet: no joint in a band
+    tags = fs.side_band_tags(topo, band)
+    np.testing.assert_array_equal(tags == fs.ELASTIC_BAND, in_band)
+    np.testing.assert_array_equal(tags[~in_band], topo.crack_tag[~in_band])
+    F = 1.0 / 0.3
+    found = {}
+    for law in ("rock", "elastic"):
+        sim, cracks = fs.simulation(geometry, topo, None, pictures=False, progress=False,
+                                    elastic_band=band if law == "elastic" else None)
+        assert cracks.topology.crack_tag is topo.crack_tag
+        cracks.interfaces.reduce_tensile = False
+        over = crack_strength_check(cracks, cracks.preload_forces, reduction=F)
+        over = np.union1d(over["tensile"], over["shear"])
+        preload = cracks.preload_forces.copy()
+        run_stage(sim, Stage("reduced", duration=400 * sim.dt, reduction=F, damping=NO_DAMPING))
+        found[law] = (preload, in_band[over].sum(), in_band[cracks.inelastic()].sum(), len(over))
+    np.testing.assert_array_equal(found["rock"][0], found["elastic"][0])
+    assert found["rock"][1] > 0 and found["rock"][2] > 0, found["rock"][1:]
+    assert found["elastic"][1] == 0 and found["elastic"][2] == 0, found["elastic"][1:]
+    assert found["elastic"][3] == found["rock"][3] - found["rock"][1]   # the rest over strength as before
