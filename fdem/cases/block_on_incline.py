@@ -56,7 +56,9 @@ CONTACT_PENALTY = 20 * YOUNG  # Pa: p = alpha E with alpha = 20
 
 def unbreakable(young: float) -> CrackProperties:
     """Crack elements that stay elastic: strengths far above any stress in these scenes."""
-    return CrackProperties(f_t=1e12, c=1e12, phi=45.0, G_I=1e15, G_II=1e15, p_n=10 * young)
+    from fdem.physics.side_bands import ELASTIC_FRACTURE_ENERGY as G, ELASTIC_STRENGTH as S
+
+    return CrackProperties(f_t=S, c=S, phi=45.0, G_I=G, G_II=G, p_n=10 * young)
 
 
 def sliding_distance(theta_deg: float, phi_deg: float, t: float) -> float:

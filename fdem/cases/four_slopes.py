@@ -47,7 +47,7 @@ from fdem.geometry.polygons import ground_surface, simple_slope
 from fdem.physics.crack_properties import CrackProperties
 from fdem.io.jsonable import write_json
 
-__all__ = ["four_slope_property_sets", "ELASTIC_BAND", "elastic_band_properties", "side_band_tags", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
+__all__ = ["four_slope_property_sets", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
            "ground_surface", "simulation", "scene", "main", "YOUNG", "POISSON", "DENSITY"]
 
@@ -66,38 +66,6 @@ def four_slope_property_sets() -> dict[int, CrackProperties]:
         1: CrackProperties(f_t=10e3, c=50e3, phi=11.0, G_I=13.0, G_II=130.0,
                            name="DFN joints", **common),
     }
-
-
-ELASTIC_BAND = 2
-"""Crack-set tag of the intact crack elements inside elastic side bands (``--elastic-band``);
-the model's own tags (pictures, summaries) keep them intact rock, tag 0."""
-
-
-def elastic_band_properties() -> CrackProperties:
-    """The intact rock's crack elements with strengths no stress in these slopes reaches: the same
-    penalties (so the band is as stiff as the rock beside it), tensile strength and cohesion
-    1e12 Pa, fracture energies 1e15 J/m^2. Under any reduction factor F they stay elastic, so a
-    band of them is a far field that carries the roller's load without softening or breaking:
-    the boundary cannot join the mechanism (``docs/cases.md`` A, "Boundaries")."""
-    import dataclasses
-
-    return dataclasses.replace(four_slope_property_sets()[INTACT], f_t=1e12, c=1e12, G_I=1e15, G_II=1e15,
-                               name="elastic side bands")
-
-
-def side_band_tags(topology, band: float) -> np.ndarray:
-    """(n_cracks,) crack tags for a crack set with elastic side bands: ``topology.crack_tag``
-    with every intact element (tag 0) whose reference midpoint lies within ``band`` [m] of the
-    model's left or right side (its smallest or largest node x) moved to :data:`ELASTIC_BAND`.
-    Joints are kept out of the bands by the geometry (:class:`fdem.geometry.joint_sets.BandedSet`)."""
-    if not (math.isfinite(band) and band > 0):
-        raise ValueError(f"an elastic side band needs a positive width [m], got {band!r}")
-    x0 = np.asarray(topology.x0, float)
-    mid_x = x0[np.asarray(topology.crack_nodes)[:, :2], 0].mean(axis=1)
-    tag = np.asarray(topology.crack_tag, dtype=np.int32).copy()
-    side = (mid_x < x0[:, 0].min() + band) | (mid_x > x0[:, 0].max() - band)
-    tag[side & (tag == INTACT)] = ELASTIC_BAND
-    return tag
 
 
 FOUR_SLOPE_HEIGHT = 15.0
@@ -250,7 +218,7 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     """The slope model: rock triangles, crack elements (intact + DFN), contact, supports, gravity.
 
     ``elastic_band`` [m]: the intact crack elements within that distance of the left and right
-    sides never soften or break (:func:`side_band_tags`, :func:`elastic_band_properties`); the
+    sides never soften or break (:func:`fdem.physics.side_bands.with_elastic_side_bands`); the
     geometry's side bands (``boundary_band``) keep the joints out of the same width.
 
     ``start="static"`` (default) puts it in static equilibrium with pre-loaded crack elements
@@ -272,10 +240,9 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     model.roller("right", "x")
     sets, crack_topology = four_slope_property_sets(), topology
     if elastic_band:
-        import dataclasses
+        from fdem.physics.side_bands import with_elastic_side_bands
 
-        sets[ELASTIC_BAND] = elastic_band_properties()
-        crack_topology = dataclasses.replace(topology, crack_tag=side_band_tags(topology, elastic_band))
+        crack_topology, sets, _ = with_elastic_side_bands(topology, sets, elastic_band)
     cracks = CrackSet(crack_topology, sets, contact_penalty=CONTACT_PENALTY)
     # The crack set keeps the tags it was built with (its own ``tag``); the topology it shares
     # with the model keeps the geometry's, so pictures and summaries count the bands as intact rock.
@@ -295,7 +262,7 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
 
 def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float | None = None,
           joint_offset: float | None = None, workflow=None, extents: dict | None = None,
-          tensile: str | None = None) -> dict:
+          tensile: str | None = None, elastic_band: float | None = None) -> dict:
     """One of the four slopes as a scene file's contents (``fdem run four-slopes --write-scene
     FILE``): the outline, brick fabric, rock, the paper's crack table, contact, supports and
     ``workflow`` (a :class:`fdem.workflow.slope.SlopeWorkflow`) of :func:`build` and
@@ -324,7 +291,8 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
         "slope": {"kind": "simple", "height": H, "face_angle": FOUR_SLOPE_FACE_ANGLE, **ext},
         "joints": [{"kind": "brick", "name": fabric.name, "dip": fabric.dip, "spacing": fabric.spacing,
                     "offset": fabric.offset, **({"side_band": band} if band is not None else {})}],
-        "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY},
+        "rock": {"young": YOUNG, "poisson": POISSON, "density": DENSITY,
+                 **({"elastic_side_bands": elastic_band} if elastic_band else {})},
         "cracks": cracks,
         "contact": {"penalty": CONTACT_PENALTY, "friction_angle": 30.0},
         "supports": {"bottom": "fixed", "left": "fix-x", "right": "fix-x"},
@@ -422,12 +390,11 @@ def main(argv=None) -> dict:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)
     except ValueError:
         parser.error(f"--spacing must be 'fine', 'coarse' or a number of metres, got {args.spacing!r}")
-    if args.write_scene is not None and args.elastic_band:
-        parser.error("--elastic-band is not part of the scene format yet: run the case itself "
-                     "(fdem run four-slopes ... --elastic-band)")
     if args.write_scene is not None:
         return write_case_scene(parser, NAME, scene(args.angle, spacing, args.size, args.refine, args.joint_offset,
-                                                    workflow, extents, tensile), args.write_scene, argv)
+                                                    workflow, extents, tensile,
+                                                    elastic_band=extents["boundary_band"] if args.elastic_band
+                                                    else None), args.write_scene, argv)
 
     from fdem.geometry.polygons import slope_toe
     from fdem.mesh.quality import quality_report

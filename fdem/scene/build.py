@@ -118,11 +118,19 @@ def build_simulation(s: dict, topology, out_dir=None, pictures: bool = True, pro
         elif kind == "fix-y":
             model.roller(group, "y")
     c = s["contact"]
+    sets, crack_topology = crack_property_sets(s), topology
+    if s["rock"].get("elastic_side_bands") is not None:
+        from fdem.physics.side_bands import with_elastic_side_bands
+
+        if 0 not in sets:
+            raise SceneError(f"{where}: [rock] elastic_side_bands: the bands copy the intact rock's crack "
+                             "properties, and the scene has no [cracks.0]")
+        crack_topology, sets, _ = with_elastic_side_bands(topology, sets, s["rock"]["elastic_side_bands"])
     try:  # the crack laws' checks that need the mesh (snap-back with each element's length)
-        cracks = CrackSet(topology, crack_property_sets(s), heterogeneity=heterogeneity(s),
-                          contact_penalty=c["penalty"])
+        cracks = CrackSet(crack_topology, sets, heterogeneity=heterogeneity(s), contact_penalty=c["penalty"])
     except ValueError as err:
         raise SceneError(f"{where}: [cracks]: {err}") from None
+    cracks.topology = topology  # the outputs read the geometry's tags: an elastic band is intact rock
     w = s["workflow"]
     cracks.interfaces.reduce_tensile = (w["reduce_tensile"] if w["reduce_tensile"] is not None
                                         else w["reduction"] != "rate")

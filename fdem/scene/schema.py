@@ -120,6 +120,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "density": _f("density [kg/m^3]", required=True, **POSITIVE),
         "damping": _f("element damping, a fraction of each triangle's critical viscosity (docs/damping.md; "
                       "omitted: none)", low=0.0),
+        "elastic_side_bands": _f("width [m] of bands along the left and right boundaries whose intact crack "
+                                 "elements stay elastic, never softening or breaking: a far field that carries "
+                                 "the rollers' load (omitted: none; keep the joints out with side_band)",
+                                 **POSITIVE),
     },
     "cracks": {  # one table per tag, [cracks.0] intact rock bridges, [cracks.1] joint set 1, ...
         "name": Key("str", "label", default=""),

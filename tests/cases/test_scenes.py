@@ -10,11 +10,13 @@ import math
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fdem.mesh.topology import build_topology
 from fdem.scene.schema import SceneError, check_scene, read_scene
 from fdem.scene.write import scene_text
 
@@ -266,6 +268,37 @@ def test_four_slopes_side_bands_go_into_the_scene_file(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(path.read_text().replace("side_band = 5.0", "side_band = -1.0"))
     with pytest.raises(SceneError, match="side_band"):
+        read_scene(bad)
+
+
+def test_four_slopes_elastic_side_bands_go_into_the_scene_file(tmp_path):
+    """``--elastic-band`` writes ``[rock] elastic_side_bands``, and the scene's crack set gives
+    the same elements the band's elastic set as the case's does: the intact elements within the
+    band of either side, none of the joints; the outputs still read the geometry's tags."""
+    from fdem.cases import four_slopes
+    from fdem.physics.side_bands import side_band_mask
+    from fdem.scene.build import build_simulation, scene_mesh
+
+    path = tmp_path / "elastic.toml"
+    four_slopes.main(["--angle", "high", "--spacing", "coarse", "--size", "3", "--elastic-band",
+                      "--write-scene", str(path)])
+    scene = read_scene(path)
+    assert scene["rock"]["elastic_side_bands"] == 5.0 and scene["joints"][0]["side_band"] == 5.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, mesh = scene_mesh(scene)
+    topo = build_topology(mesh)
+    _, from_scene, _ = build_simulation(scene, topo, None, pictures=False, progress=False)
+    _, from_case = four_slopes.simulation(None, topo, None, pictures=False, progress=False, elastic_band=5.0)
+    band = side_band_mask(topo, 5.0) & (topo.crack_tag == 0)
+    assert band.sum() > 0
+    for cracks in (from_scene, from_case):
+        assert cracks.topology is topo
+        np.testing.assert_array_equal(cracks.tag == 2, band)
+        assert cracks.props[2].tolist() == from_case.props[2].tolist()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(path.read_text().replace("elastic_side_bands = 5.0", "elastic_side_bands = 0.0"))
+    with pytest.raises(SceneError, match="elastic_side_bands"):
         read_scene(bad)
 
 

@@ -313,6 +313,7 @@ def test_elastic_side_bands_carry_the_rollers_load_and_never_yield():
     undamped steps, while those of the rock band do. The model's own tags (pictures, summaries)
     keep the bands intact rock."""
     from fdem.cases import four_slopes as fs
+    from fdem.physics.side_bands import with_elastic_side_bands
     from fdem.solve.damping import NO_DAMPING
     from fdem.workflow.stages import Stage, run_stage
 
@@ -325,9 +326,10 @@ def test_elastic_side_bands_carry_the_rollers_load_and_never_yield():
     mid_x = x0[cn[:, :2], 0].mean(axis=1)
     in_band = (mid_x < x0[:, 0].min() + band) | (mid_x > x0[:, 0].max() - band)
     assert not (in_band & (topo.crack_tag > 0)).any()              # BandedSet: no joint in a band
-    tags = fs.side_band_tags(topo, band)
-    np.testing.assert_array_equal(tags == fs.ELASTIC_BAND, in_band)
-    np.testing.assert_array_equal(tags[~in_band], topo.crack_tag[~in_band])
+    crack_topo, sets, tag = with_elastic_side_bands(topo, fs.four_slope_property_sets(), band)
+    assert tag == 2 and sets[tag].p_n == sets[0].p_n and sets[tag].k_t == sets[0].k_t
+    np.testing.assert_array_equal(crack_topo.crack_tag == tag, in_band)
+    np.testing.assert_array_equal(crack_topo.crack_tag[~in_band], topo.crack_tag[~in_band])
     F = 1.0 / 0.3
     found = {}
     for law in ("rock", "elastic"):
