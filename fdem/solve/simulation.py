@@ -1006,7 +1006,9 @@ class Simulation:
         ``tan 2a = 2 s_xy / (s_xx - s_yy)`` and ``stress_direction_2`` (normal to it),
         ``stress_von_mises`` [Pa], ``strain``, the Green-Lagrange strain ``(F^T F - I)/2`` [-] as
         a symmetric tensor (same order, ``zz = 0``: plane strain; the small strain for small
-        rotations), ``property`` and ``body`` (ids)."""
+        rotations), ``property`` and ``body`` (ids), ``held`` (1 where the run itself has held
+        every corner in place since it began: fly-rock stopped beyond the model's end,
+        :attr:`fdem.workflow.stages.Stage.escape_share`; 0 elsewhere, supports included)."""
         state = state or self.state
         s = self.stresses(state)
         n = self.model.n_triangles
@@ -1026,7 +1028,8 @@ class Simulation:
                 "stress_von_mises": s["von_mises"],
                 "strain": np.column_stack([exx, eyy, zero, exy, zero, zero]),
                 "property": self.model.triangle_property,
-                "body": np.asarray(self.model.topology.triangle_body, np.int32)}
+                "body": np.asarray(self.model.topology.triangle_body, np.int32),
+                "held": (self.flags != self.model.flags)[self.triangles].all(axis=1).astype(np.int8)}
         return {"point": point, "cell": cell}
 
     def contact_geometry(self, state: State | None = None) -> dict[str, np.ndarray]:

@@ -120,6 +120,8 @@ def test_fly_rock_is_held_beyond_the_model_and_the_runout_goes_on():
     assert r.reason == "completed" and "1 triangle(s) of fragments that left the model" in r.detail
     assert np.all(sim.flags[tri[thrown]] == HELD) and np.all(sim.state.v[tri[thrown]] == 0.0)
     assert 4.1 < sim.state.x[tri[thrown], 0].max() < 4.1 + 2.0 * 0.011  # held within a check of the margin
+    held = sim.fields()["cell"]["held"]  # the frames mark it, so that a view can leave it out
+    assert held[thrown] == 1 and held.sum() == 1
     row = sim.history[-1]
     assert row["boundary_work"] == pytest.approx(-kinetic, rel=1e-5)   # its kinetic energy, taken out
     assert row["balance_error_relative"] < 1e-9
