@@ -373,6 +373,9 @@ def main(argv=None) -> dict:
     if args.elastic_band and extents["boundary_band"] is None:
         parser.error("--elastic-band makes the side bands elastic, and this run has none: give --boundary-band "
                      "METRES (the high angle has 5 m by default)")
+    if args.elastic_band and extents["boundary_band"] < args.size:
+        parser.error(f"--elastic-band: side bands of {extents['boundary_band']:g} m are narrower than one element "
+                     f"(--size {args.size:g} m) and would hold no crack element: widen --boundary-band")
     if not resuming:
         pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]

@@ -25,17 +25,22 @@ import numpy as np
 from fdem.mesh.topology import INTACT
 from fdem.physics.crack_properties import CrackProperties
 
-__all__ = ["ELASTIC_STRENGTH", "ELASTIC_FRACTURE_ENERGY", "stays_elastic", "side_band_mask", "with_elastic_side_bands"]
+__all__ = ["ELASTIC_STRENGTH", "ELASTIC_FRACTURE_ENERGY", "stays_elastic", "can_break", "side_band_mask",
+           "with_elastic_side_bands"]
 
 
 ELASTIC_STRENGTH = 1e12
 """Tensile strength and cohesion [Pa] of a crack element that stays elastic: some 1e5 times the
-stress at the base of a kilometre of rock, so that no reduction factor brings it within reach."""
+stress at the base of a kilometre of rock, so that no reduction factor a slope is taken to (the
+strengths divided by F >= 1e-3) brings it within reach."""
 
 
-ELASTIC_FRACTURE_ENERGY = 1e15
-"""Fracture energies [J/m^2] of such an element (the softening branch stays longer than the
-elastic one: :class:`CrackProperties` refuses snap-back)."""
+ELASTIC_FRACTURE_ENERGY = 1e24
+"""Fracture energies [J/m^2] of such an element, large enough that its softening branch stays
+longer than its elastic one (:class:`CrackProperties` refuses snap-back, ``G_I > f_t^2 L0 /
+(2 p_n)`` with the reduced ``f_t / F``) for any element up to 1 km long, any normal penalty above
+1e6 Pa and F >= 1e-3: ``2 G p_n F^2 / (f_t^2 L0) >= 2``. Nothing overflows: the opening that
+softens it fully, about ``2 G / f_t``, is 2e12 m."""
 
 
 def stays_elastic(props: CrackProperties, name: str | None = None) -> CrackProperties:
@@ -45,10 +50,17 @@ def stays_elastic(props: CrackProperties, name: str | None = None) -> CrackPrope
                                G_II=ELASTIC_FRACTURE_ENERGY, name=name if name is not None else props.name)
 
 
+def can_break(props: CrackProperties) -> bool:
+    """False for a set made by :func:`stays_elastic` (its strength no stress reaches): such a set
+    takes no part in figures drawn from the breakable sets (the events' stress drop)."""
+    return props.f_t < ELASTIC_STRENGTH
+
+
 def side_band_mask(topology, band: float) -> np.ndarray:
     """(n_cracks,) bool: the crack elements whose reference midpoint lies within ``band`` [m] of
     the model's left or right side (its smallest or largest node x)."""
-    if not (isinstance(band, (int, float)) and math.isfinite(band) and band > 0):
+    if not (isinstance(band, (int, float, np.floating)) and not isinstance(band, bool) and math.isfinite(band)
+            and band > 0):
         raise ValueError(f"an elastic side band needs a positive finite width [m], got {band!r}")
     x0 = np.asarray(topology.x0, float)
     mid_x = x0[np.asarray(topology.crack_nodes)[:, :2], 0].mean(axis=1)
@@ -67,6 +79,11 @@ def with_elastic_side_bands(topology, sets: dict[int, CrackProperties], band: fl
         raise ValueError("elastic side bands copy the intact rock's crack properties: the sets have no tag 0")
     tag = max(sets) + 1
     tags = np.asarray(topology.crack_tag, dtype=np.int32).copy()
-    tags[side_band_mask(topology, band) & (tags == INTACT)] = tag
+    inside = side_band_mask(topology, band) & (tags == INTACT)
+    if not inside.any():
+        length = float(np.median(np.asarray(topology.crack_length0, float)))
+        raise ValueError(f"elastic side bands {band:g} m wide hold no intact crack element (the elements are "
+                         f"about {length:.3g} m long): make them at least one element wide")
+    tags[inside] = tag
     sets = {**sets, tag: stays_elastic(sets[INTACT], name=f"{sets[INTACT].name or 'intact rock'} (elastic side bands)")}
     return dataclasses.replace(topology, crack_tag=tags), sets, tag

@@ -100,8 +100,10 @@ class RunReport:
         self.floor_y = floor_y
         self.reference_events = reference_events
         self.fixed = fixed_body_triangles(sim.model)  # a fixed wall is no fragment
-        if stress_drop is None:
-            stress_drop = float(np.mean([p.f_t for p in self.cracks.property_sets.values()]))
+        if stress_drop is None:  # the sets that can break: an elastic side band's never does
+            from fdem.physics.side_bands import can_break
+
+            stress_drop = float(np.mean([p.f_t for p in self.cracks.property_sets.values() if can_break(p)]))
         self.stress_drop = float(stress_drop)
         topo = sim.model.topology
         cracks = self.cracks

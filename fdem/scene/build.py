@@ -119,13 +119,13 @@ def build_simulation(s: dict, topology, out_dir=None, pictures: bool = True, pro
             model.roller(group, "y")
     c = s["contact"]
     sets, crack_topology = crack_property_sets(s), topology
-    if s["rock"].get("elastic_side_bands") is not None:
+    if s["rock"].get("elastic_side_bands") is not None:  # [cracks.0], which the bands copy, is required
         from fdem.physics.side_bands import with_elastic_side_bands
 
-        if 0 not in sets:
-            raise SceneError(f"{where}: [rock] elastic_side_bands: the bands copy the intact rock's crack "
-                             "properties, and the scene has no [cracks.0]")
-        crack_topology, sets, _ = with_elastic_side_bands(topology, sets, s["rock"]["elastic_side_bands"])
+        try:
+            crack_topology, sets, _ = with_elastic_side_bands(topology, sets, s["rock"]["elastic_side_bands"])
+        except ValueError as err:
+            raise SceneError(f"{where}: [rock] elastic_side_bands: {err}") from None
     try:  # the crack laws' checks that need the mesh (snap-back with each element's length)
         cracks = CrackSet(crack_topology, sets, heterogeneity=heterogeneity(s), contact_penalty=c["penalty"])
     except ValueError as err:

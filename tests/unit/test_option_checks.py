@@ -372,6 +372,7 @@ def no_meshing_module():
 @pytest.mark.parametrize("argv, needle", [
     (["--angle", "low", "--elastic-band"], "this run has none: give --boundary-band"),
     (["--angle", "high", "--boundary-band", "0", "--elastic-band"], "this run has none: give --boundary-band"),
+    (["--angle", "high", "--boundary-band", "0.5", "--size", "1", "--elastic-band"], "narrower than one element"),
 ])
 def test_four_slopes_refuses_an_elastic_band_it_cannot_build(argv, needle, capsys, no_meshing, tmp_path):
     from fdem.cases import four_slopes

@@ -346,3 +346,14 @@ def test_elastic_side_bands_carry_the_rollers_load_and_never_yield():
     assert found["rock"][1] > 0 and found["rock"][2] > 0, found["rock"][1:]
     assert found["elastic"][1] == 0 and found["elastic"][2] == 0, found["elastic"][1:]
     assert found["elastic"][3] == found["rock"][3] - found["rock"][1]   # the rest over strength as before
+    # The events' stress drop is the breakable sets' mean f_t, as without the bands; the band's
+    # set passes the snap-back check wherever the rock's own does (f_t divided by F as well)
+    from fdem.results.report import RunReport
+
+    sim, cracks = fs.simulation(geometry, topo, None, pictures=False, progress=False, elastic_band=band)
+    assert RunReport(sim, toe_x=45.0).stress_drop == pytest.approx(np.mean([10e3, 50e3]))
+    cracks.interfaces.reduce_tensile = True
+    for factor in (0.5, 1.0, 1e3):
+        cracks.interfaces.set_reduction(factor)
+    with pytest.raises(ValueError, match="hold no intact crack element"):
+        with_elastic_side_bands(topo, fs.four_slope_property_sets(), 0.02)
