@@ -238,15 +238,12 @@ def simulation(geometry, topology, out_dir: Path | None, pictures: bool = True, 
     model.fix("bottom")
     model.roller("left", "x")
     model.roller("right", "x")
-    sets, crack_topology = four_slope_property_sets(), topology
+    sets, tags = four_slope_property_sets(), None
     if elastic_band:
         from fdem.physics.side_bands import with_elastic_side_bands
 
-        crack_topology, sets, _ = with_elastic_side_bands(topology, sets, elastic_band)
-    cracks = CrackSet(crack_topology, sets, contact_penalty=CONTACT_PENALTY)
-    # The crack set keeps the tags it was built with (its own ``tag``); the topology it shares
-    # with the model keeps the geometry's, so pictures and summaries count the bands as intact rock.
-    cracks.topology = topology
+        tags, sets, _ = with_elastic_side_bands(topology, sets, elastic_band)
+    cracks = CrackSet(topology, sets, contact_penalty=CONTACT_PENALTY, tags=tags)
     if start == "static":
         geostatic_start(model, cracks)
     elif start == "k0":

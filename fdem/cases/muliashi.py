@@ -230,7 +230,7 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
         model.roller("right", "x")
     model.set_element_damping()
     sets = property_sets(size, strength_factor=strength_factor)
-    crack_topo, random_tags = topo, (0,)
+    crack_tags, random_tags = None, (0,)
     if full_strength_ground and strength_factor != 1.0:
         from fdem.geometry.polygons import slope_toe
 
@@ -238,14 +238,13 @@ def build(size: float, spacing_rule: str = "pitch", above_toe: bool = True, out_
         full = property_sets(size)
         for t in np.unique(tags[tags >= GROUND_TAG_OFFSET]) - GROUND_TAG_OFFSET:
             sets[int(t) + GROUND_TAG_OFFSET] = dataclasses.replace(full[int(t)], name=f"{full[int(t)].name} below the toe")
-        crack_topo = dataclasses.replace(topo, crack_tag=tags)
+        crack_tags = tags
         random_tags = (0, GROUND_TAG_OFFSET)  # the same draws as without: Heterogeneity draws for all elements
-    cracks = CrackSet(crack_topo, sets, contact_penalty=sets[0].p_n,
+    # The crack set reads its properties by ``crack_tags``; the topology it shares with the
+    # model keeps the geometry's tags (0 intact, j joint set j): the pictures draw tags > 0 as
+    # joints, and the ground is no joint.
+    cracks = CrackSet(topo, sets, contact_penalty=sets[0].p_n, tags=crack_tags,
                       heterogeneity=Heterogeneity("normal", cov=0.1, seed=heterogeneity_seed, tags=random_tags))
-    # The crack set reads the tags once, when it is built (its own ``tag`` from then on); it
-    # then shares the model's topology, whose tags stay the geometry's (0 intact, j joint set
-    # j): the pictures draw tags > 0 as joints, and the ground is no joint.
-    cracks.topology = topo
     report = geostatic_start(model, cracks)
     contact = ContactSet(topo, sets[0].p_n, friction_angle=JOINT_FRICTION, mass=model.node_mass(), cracks=cracks)
     sim = Simulation(model, providers=[cracks, contact], out_dir=out_dir, name="muliashi", pictures=pictures,

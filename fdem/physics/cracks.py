@@ -157,6 +157,11 @@ class CrackSet:
         compressed element that breaks hands over the same force and energy instead of a jump
         (with ``k_c = k_n`` contact typically pushes several times harder and creates energy).
         Default: ``k_c = k_n``.
+    tags : (n_cracks,) int, the property-set tag of each element, when it differs from the
+        geometry's ``topology.crack_tag`` (elastic side bands, ground kept at full strength).
+        The crack set reads its properties by these (its ``tag``); ``topology``, which the model
+        and the outputs share, keeps the geometry's tags, so pictures and summaries still count
+        such elements as what the geometry made them. Default: ``topology.crack_tag``.
 
     State exposed for output (topology order): ``damage`` (n,) in [0, 1], ``damage_ip`` (n, 2),
     ``broken`` (n,) bool, ``dissipated`` (n, 3), ``crack_fields()``, ``events`` (structured
@@ -169,7 +174,7 @@ class CrackSet:
     def __init__(self, topology: Topology, property_sets: Mapping[int, CrackProperties] | Sequence[CrackProperties],
                  heterogeneity: Heterogeneity | None = None, scheme: str = "colour",
                  parallel_min: int = K.PARALLEL_MIN, contact_penalty: float | None = None,
-                 absent_ok: Collection[int] = ()) -> None:
+                 absent_ok: Collection[int] = (), tags: np.ndarray | None = None) -> None:
         if scheme not in ("colour", "gather"):
             raise ValueError(f"scheme must be 'colour' or 'gather', got {scheme!r}")
         self.topology = topology
@@ -179,7 +184,9 @@ class CrackSet:
         self.property_sets: dict[int, CrackProperties] = self.interfaces.property_sets
         self.heterogeneity = heterogeneity or Heterogeneity()
 
-        tag = np.asarray(topology.crack_tag, dtype=np.int32)
+        tag = np.asarray(topology.crack_tag if tags is None else tags, dtype=np.int32)
+        if tag.shape != (len(topology.crack_tag),):
+            raise ValueError(f"tags must give one tag per crack element ({len(topology.crack_tag)}), got shape {tag.shape}")
         self.tag = tag
         n = tag.shape[0]
         present = np.unique(tag)

@@ -12,8 +12,8 @@ a far field that carries the rollers' load and cannot join the mechanism. Compar
 of safety with rock bands and with elastic ones shows whether the boundary takes part.
 
 The crack set gets the band's elements under a tag of their own (one past the largest tag of
-its property sets); the topology the model and the outputs read keeps the geometry's tags, so
-pictures and summaries count the bands as intact rock.
+its property sets, its ``tags``); the topology the model and the outputs read keeps the
+geometry's tags, so pictures and summaries count the bands as intact rock.
 """
 from __future__ import annotations
 
@@ -68,13 +68,13 @@ def side_band_mask(topology, band: float) -> np.ndarray:
 
 
 def with_elastic_side_bands(topology, sets: dict[int, CrackProperties], band: float):
-    """``(crack_topology, sets, tag)`` for a crack set with elastic side bands ``band`` [m] wide.
+    """``(tags, sets, tag)`` for a crack set with elastic side bands ``band`` [m] wide.
 
     The intact elements (tag 0) of :func:`side_band_mask` move to ``tag`` (one past the largest
-    key of ``sets``), whose set is :func:`stays_elastic` of the intact rock's; ``crack_topology``
-    is ``topology`` with those tags (build the :class:`fdem.physics.cracks.CrackSet` on it, then
-    give the crack set back ``topology``, whose tags the outputs read). Joint elements inside a
-    band keep their tags: keep the joints out of the bands in the geometry."""
+    key of ``sets``), whose set is :func:`stays_elastic` of the intact rock's; ``tags`` is the
+    topology's ``crack_tag`` with those moved, for ``CrackSet(topology, sets, tags=tags)`` (the
+    topology keeps the geometry's tags, which the outputs read). Joint elements inside a band
+    keep their tags: keep the joints out of the bands in the geometry."""
     if INTACT not in sets:
         raise ValueError("elastic side bands copy the intact rock's crack properties: the sets have no tag 0")
     tag = max(sets) + 1
@@ -86,4 +86,4 @@ def with_elastic_side_bands(topology, sets: dict[int, CrackProperties], band: fl
                          f"about {length:.3g} m long): make them at least one element wide")
     tags[inside] = tag
     sets = {**sets, tag: stays_elastic(sets[INTACT], name=f"{sets[INTACT].name or 'intact rock'} (elastic side bands)")}
-    return dataclasses.replace(topology, crack_tag=tags), sets, tag
+    return tags, sets, tag

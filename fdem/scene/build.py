@@ -118,19 +118,18 @@ def build_simulation(s: dict, topology, out_dir=None, pictures: bool = True, pro
         elif kind == "fix-y":
             model.roller(group, "y")
     c = s["contact"]
-    sets, crack_topology = crack_property_sets(s), topology
+    sets, tags = crack_property_sets(s), None
     if s["rock"].get("elastic_side_bands") is not None:  # [cracks.0], which the bands copy, is required
         from fdem.physics.side_bands import with_elastic_side_bands
 
         try:
-            crack_topology, sets, _ = with_elastic_side_bands(topology, sets, s["rock"]["elastic_side_bands"])
+            tags, sets, _ = with_elastic_side_bands(topology, sets, s["rock"]["elastic_side_bands"])
         except ValueError as err:
             raise SceneError(f"{where}: [rock] elastic_side_bands: {err}") from None
     try:  # the crack laws' checks that need the mesh (snap-back with each element's length)
-        cracks = CrackSet(crack_topology, sets, heterogeneity=heterogeneity(s), contact_penalty=c["penalty"])
+        cracks = CrackSet(topology, sets, heterogeneity=heterogeneity(s), contact_penalty=c["penalty"], tags=tags)
     except ValueError as err:
         raise SceneError(f"{where}: [cracks]: {err}") from None
-    cracks.topology = topology  # the outputs read the geometry's tags: an elastic band is intact rock
     w = s["workflow"]
     cracks.interfaces.reduce_tensile = (w["reduce_tensile"] if w["reduce_tensile"] is not None
                                         else w["reduction"] != "rate")

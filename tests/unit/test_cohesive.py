@@ -341,6 +341,20 @@ def test_bad_input_is_rejected_with_clear_errors():
         cs.interfaces.set_reduction(1e-3)  # a stronger rock (F = 1e-3) would snap back with this G_I
 
 
+def test_tags_give_elements_properties_other_than_the_geometry_s():
+    """``tags=`` reads an element's properties from another set (an elastic side band, ground at
+    full strength) while the topology shared with the outputs keeps the geometry's tag: the
+    peak traction of an intact element (tag 0) given tag 5 is set 5's f_t, not set 0's."""
+    strong = props()
+    dr = Driver(strong)
+    dr.cs = CrackSet(dr.topo, {0: props(f_t=0.25 * strong.f_t), 5: strong}, tags=np.array([5]))
+    assert dr.cs.tag.tolist() == [5] and dr.topo.crack_tag.tolist() == [0] and dr.cs.topology is dr.topo
+    peak = max(dr.move(o, 0.0)[0] for o in np.linspace(0, 2 * strong.f_t / KN, 400)[1:])
+    assert peak == pytest.approx(strong.f_t, rel=5e-3)
+    with pytest.raises(ValueError, match=r"one tag per crack element \(1\), got shape \(2,\)"):
+        CrackSet(dr.topo, {0: strong}, tags=np.array([0, 0]))
+
+
 # ----------------------------------------------------------------------------- run-time strength
 def test_strength_reduction_scales_f_t_c_and_tan_phi():
     p = props()
