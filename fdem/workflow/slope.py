@@ -338,7 +338,9 @@ def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> N
     runout = record(run_stage(sim, stage, journal=journal))
     summary["outcome"] = "failed"
     # this runout's end, not an earlier creep's (the reduction carried on from a slope at rest)
-    summary["ending"] = f"failed at F = {F:.4g}; the runout ended {runout.reason} at t = {runout.t_end:.4g} s ({runout.detail})"
+    how = {"converged": "came to rest", "capped": "reached its time cap"}.get(runout.reason, f"ended ({runout.reason})")
+    # (t: the run's clock; the detail's "after" counts from the runout's start)
+    summary["ending"] = f"failed at F = {F:.4g}; the runout {how} at t = {runout.t_end:.4g} s ({runout.detail})"
     if runout.reason == "left_model":
         summary["ending"] = (f"the failed mass ran off the end of the model at t = {runout.t_end:.4g} s ({runout.detail}): "
                              f"the runout distance is a lower bound; lengthen the floor in front of the toe")
