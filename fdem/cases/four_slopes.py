@@ -74,6 +74,14 @@ FOUR_SLOPE_HEIGHT = 15.0
 FOUR_SLOPE_FACE_ANGLE = 45.0
 
 
+LOCAL_FALL_AREA = 0.1 * FOUR_SLOPE_HEIGHT ** 2 / (2.0 * math.tan(math.radians(FOUR_SLOPE_FACE_ANGLE)))
+"""A tenth of the face wedge above the toe level (the triangle between the toe, the crest edge
+and the toe level below it, ``H^2 / (2 tan beta)``): 11.25 m^2. A failure that comes to rest
+with less moved than this is a block off the face (the high-angle coarse slope with a joint
+through the toe loses a 2.7 m^2 toe block at F = 1.43); the slides of the four slopes move
+180-560 m^2 (``docs/cases.md`` A). :class:`fdem.workflow.slope.SlopeWorkflow` ``local_fall_area``."""
+
+
 FOUR_SLOPE_JOINT_DIP = {"low": 15.0, "high": 115.0}
 
 
@@ -278,7 +286,8 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
     wf = {}
     if workflow is not None:
         wf = {"reduction": workflow.reduction, "fos": list(workflow.fos) if workflow.fos else None,
-              "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction}
+              "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction,
+              **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
     return {
@@ -335,6 +344,12 @@ def main(argv=None) -> dict:
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
                              "for the same runout within its spread, and more accurate impact energies, "
                              "docs/pareto.md)")
+    parser.add_argument("--local-fall-area", type=float, default=None, metavar="M2",
+                        help="in the reduction steps, a failure that comes to rest with less than this area "
+                             "[m^2] moved 1 %% of the model height (all falls so far together) is a block off "
+                             "the face: the reduction carries on (default: a tenth of the face wedge above the "
+                             f"toe level, H^2 / (20 tan(face angle)) = {LOCAL_FALL_AREA:g} m^2; 0: any fall ends "
+                             "the reduction)")
     parser.add_argument("--max-steps", type=int, default=None, choices=[0],
                         help="0: mesh and pictures only (stages end by physics, not by step counts: "
                              "--max-time caps the simulated time)")
@@ -353,6 +368,9 @@ def main(argv=None) -> dict:
         parser.error(f"--refine (element size factor on joints) must lie in (0, 1], got {args.refine}")
     if args.joint_offset is not None and not (math.isfinite(args.joint_offset) and 0 <= args.joint_offset < 1):
         parser.error(f"--joint-offset must be a fraction of the spacing in [0, 1), got {args.joint_offset}")
+    if args.local_fall_area is not None and not (math.isfinite(args.local_fall_area) and args.local_fall_area >= 0):
+        parser.error(f"--local-fall-area must be a number of square metres >= 0 (0: any fall ends the reduction), "
+                     f"got {args.local_fall_area}")
     # a run keeps the settings it began with: a resumed run's run.json names them (written below),
     # and one begun before they were written there ran with the defaults of then
     resuming = getattr(args, "resume", None) is not None
@@ -361,6 +379,8 @@ def main(argv=None) -> dict:
         args.tensile = "reduced"  # f_t was divided by F in every mode before --tensile existed
     if resuming and "--runout-dt-fraction" not in began_with:
         args.runout_dt_fraction = 0.4  # the runout's factor before it became 0.8
+    if args.local_fall_area is None:  # any fall ended the reduction before local falls were told apart
+        args.local_fall_area = 0.0 if resuming and "--local-fall-area" not in began_with else LOCAL_FALL_AREA
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
     try:
         extents = resolve_extents(args.angle, {k: getattr(args, k) for k in EXTENTS_BEFORE_PINNING},
@@ -374,7 +394,8 @@ def main(argv=None) -> dict:
         parser.error(f"--elastic-band: side bands of {extents['boundary_band']:g} m are narrower than one element "
                      f"(--size {args.size:g} m) and would hold no crack element: widen --boundary-band")
     if not resuming:
-        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + [
+        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)),
+                  ("--local-fall-area", f"{args.local_fall_area:g}")] + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
         args.run_record["argv"] = list(args.run_record["argv"]) + [
             a for flag, value in pinned if flag not in args.run_record["argv"] for a in (flag, value)]
@@ -382,7 +403,8 @@ def main(argv=None) -> dict:
 
     try:  # the workflow's settings are checked now, not after hours of stages
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
-                                 runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction)
+                                 runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
+                                 local_fall_area=args.local_fall_area or None)
     except ValueError as err:
         parser.error(str(err))
     set_threads(args.threads)
@@ -466,7 +488,7 @@ def main(argv=None) -> dict:
             sim.close()
         summary.update({"workflow": result, "outcome": result["outcome"], "ending": result.get("ending"),
                         "checkpoints": journal.writes,
-                        "failed_at_factor": result["failed_at_factor"],
+                        "failed_at_factor": result["failed_at_factor"], "local_falls": result.get("local_falls", []),
                         **factor_of_safety_figures(result),
                         "toe": [toe_x, toe_y], "time_capped": time_capped(sim),
                         "seconds_simulation": time.perf_counter() - t1})
@@ -481,6 +503,9 @@ def main(argv=None) -> dict:
               + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
               + (f"; factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "
                  f"{summary['fos_bracket'][1]:.3f}, {summary['fos_method']})" if summary.get("fos") else ""))
+        for fall in summary["local_falls"]:
+            print(f"local fall at F = {fall['factor']:.3f}: {fall['area_m2']:.3g} m^2 moved (at most "
+                  f"{fall['max_displacement_m']:.3g} m), at rest at t = {fall['at_rest_s']:.4g} s; the reduction carried on")
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")

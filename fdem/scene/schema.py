@@ -182,6 +182,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rest_kinetic_ratio": _f("kinetic energy over its peak that counts as rest [-]", 0.01, low=0.0, high=1.0,
                                  open_low=True, open_high=True),
         "runout_dt_fraction": _f("time-step factor of the runout [-]", 0.8, **FRACTION),
+        "local_fall_area": _f("area moved the failure displacement below which a fall that came to rest is a block "
+                              "off the face and the reduction steps carry on [m^2] (default: none, any fall ends "
+                              "them)", **POSITIVE),
         "reduce_tensile": Key("bool", "whether F divides the tensile strength f_t too (default: yes with reduction "
                                       "= steps, no with rate, the paper reducing cohesion and friction)"),
         "dt_fraction": _f("time-step factor of the other stages [-]", 0.8, **FRACTION),

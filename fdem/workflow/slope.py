@@ -23,7 +23,9 @@ Every stage's result (why it ended, when, how many steps) goes into the returned
 every ending is one of its outcomes: ``stable``, ``failed``, ``crept`` (a reduction stage did not
 settle, but the undamped stage after it came to rest after less than the failure displacement:
 the slope crept and stopped; in steps, the reduction then carries on from the resting state,
-and a later factor may still fail), ``undecided`` (such a stage whose runout was capped before
+and a later factor may still fail; with ``local_fall_area`` likewise after a *local fall*, a
+runout that came to rest with less than that area moved the failure displacement: a block
+off the face, not the slope), ``undecided`` (such a stage whose runout was capped before
 it came to rest or moved the failure displacement), ``time_capped``, ``interrupted`` (Ctrl-C or a signal: the state reached is kept) or ``unstable`` (the guard stopped an unstable
 step: the reason, and the last good state to resume from with a smaller step). With a
 :class:`~fdem.workflow.journal.RunJournal` the run writes resumable checkpoints and a resumed
@@ -80,6 +82,11 @@ class SlopeWorkflow:
         the free-fall time over the model height ``H``)
     rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
         its peak for one response time (default 0.01)
+    local_fall_area : in steps, a runout that comes to rest with less than this reference area
+        [m^2 per metre] of triangles moved more than the failure displacement since the start (all
+        falls so far together) is a local fall, a block off the face, not the slope's failure: the
+        reduction carries on from the resting state as after a creep (:func:`_tell_local_fall`).
+        Default ``None``: any failure ends the reduction
     trigger : ``"strength"`` (strength reduction, default) or ``"gravity"``: gravity increase, the
         loading of the bonded-particle Muliashi paper (density raised until the slope fails). With
         ``"gravity"``, ``fos`` is the gravity-factor bracket, required; the slope then slides at
@@ -106,6 +113,7 @@ class SlopeWorkflow:
     rest_kinetic_ratio: float = 0.01
     runout_dt_fraction: float | None = 0.8
     trigger: str = "strength"
+    local_fall_area: float | None = None
 
     def __post_init__(self):
         """Every field checked, the message naming it: a negative time or displacement, an
@@ -131,7 +139,7 @@ class SlopeWorkflow:
             v = getattr(self, name)
             if not (_real(v) and 0.0 < v < 1.0):
                 raise ValueError(f"SlopeWorkflow.{name} must lie in (0, 1), got {v!r}")
-        for name in ("step_time", "fail_displacement", "runout_time"):
+        for name in ("step_time", "fail_displacement", "runout_time", "local_fall_area"):
             _check_positive(self, name, optional=True)
         if self.runout_dt_fraction is not None and not (_real(self.runout_dt_fraction)
                                                         and 0.0 < self.runout_dt_fraction <= 1.0):
@@ -285,18 +293,19 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                     summary["outcome"] = "time_capped"
                     return
                 summary["failed_at_factor"] = F
-                if r.reason == "failed":  # a node moved the failure displacement: the runout follows
-                    break
-                # Not settled within its cap, yet nothing has moved the failure displacement: follow
-                # it undamped. A slope that creeps and comes to rest stands at F, and the reduction
-                # carries on from the resting state; one that runs on has failed, and that was its runout.
+                # A node moved the failure displacement, or the stage did not settle within its
+                # cap: follow it undamped. A slope that creeps and comes to rest stands at F, as
+                # does one that lost only a block off its face (with local_fall_area), and the
+                # reduction carries on from the resting state; one that runs on has failed, and
+                # that was its runout.
                 _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
-                if summary.get("outcome") != "crept":
+                _tell_local_fall(sim, wf, summary, fail.displacement)
+                if summary.get("outcome") not in ("crept", "local_fall"):
                     return
                 summary.pop("outcome")
             else:
                 summary["outcome"] = "crept" if summary.get("crept_at_factors") else "stable"
-                if summary["outcome"] == "crept":
+                if summary.get("crept_at_factors") or summary.get("local_falls"):
                     summary["ending"] += f"; the reduction carried on and the slope stood at every factor to F = {F:.4g}"
                 return
         else:
@@ -387,6 +396,38 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
                          f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height)")
 
 
+def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float) -> None:
+    """A failed runout that came to rest with less than ``wf.local_fall_area`` [m^2] of triangles
+    whose centroid moved more than the failure displacement since the start (every fall so far
+    counted together, so that a slope losing its face block by block fails once the blocks add
+    up) is a local fall: a block off the face, not the slope. It is booked in ``local_falls``
+    (factor, area, largest displacement, time), its outcome is ``local_fall`` until the reduction
+    carries on from the resting state, ``failed_at_factor`` goes back to None, and the
+    reduction-step bracket reads the factor as one the slope stands at
+    (:func:`factor_of_safety_figures`). A runout cut by its cap, or one whose mass ran off the
+    model, is no local fall."""
+    if wf.local_fall_area is None or summary.get("outcome") != "failed" or not summary["stages"]:
+        return
+    runout = summary["stages"][-1]
+    if runout.get("reason") != "converged":
+        return
+    from fdem.results.analysis import displaced
+
+    topology = sim.model.topology
+    area = float(topology.triangle_area0[displaced(topology, sim.state.x, fail_displacement)].sum())
+    if area >= wf.local_fall_area:
+        return
+    factor = summary["failed_at_factor"]
+    moved = float(np.linalg.norm(sim.state.x - topology.x0, axis=1).max())
+    summary.setdefault("local_falls", []).append({"factor": factor, "area_m2": area, "max_displacement_m": moved,
+                                                  "at_rest_s": float(runout["t_end"])})
+    summary["outcome"] = "local_fall"
+    summary["failed_at_factor"] = None
+    summary["ending"] = (f"a local fall at F = {factor:.4g}: {area:.3g} m^2 moved more than {fail_displacement:.3g} m "
+                         f"(at most {moved:.3g} m) and came to rest at t = {runout['t_end']:.4g} s, under the "
+                         f"local-fall area {wf.local_fall_area:.3g} m^2: a block off the face, not the slope")
+
+
 def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:
     """The gravity-increase workflow after equilibrium: the critical gravity factor ``k`` by
     bisection on ``wf.fos`` (:class:`fdem.workflow.fos.GravityIncrease`), then, at the bracket's
@@ -459,6 +500,7 @@ def factor_of_safety_figures(result: dict) -> dict:
               if st["reason"] == "converged"]
     if result.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
         stable.append(result["crept_at_factor"])
+    stable += [fall["factor"] for fall in result.get("local_falls", [])]  # lost a block and stood
     failing = result.get("failed_at_factor")
     if failing is None or not stable:
         return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],

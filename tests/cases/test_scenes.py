@@ -215,6 +215,14 @@ def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_ba
     with pytest.raises(SystemExit) as exit_:
         four_slopes.main(["--base-depth", "0", "--out", str(tmp_path / "x")])
     assert exit_.value.code == 2 and "--base-depth must be a positive number of metres" in capsys.readouterr().err
+    # a block off the face is told from the slope's failure: a tenth of the 45 deg face wedge, 11.25 m^2
+    assert scene["workflow"]["local_fall_area"] == pytest.approx(0.1 * 15.0 ** 2 / 2)
+    from fdem.scene.objects import workflow
+
+    assert workflow(scene).local_fall_area == pytest.approx(11.25)  # the scene file's workflow carries it
+    with pytest.raises(SystemExit) as exit_:
+        four_slopes.main(["--local-fall-area", "-1", "--out", str(tmp_path / "y")])
+    assert exit_.value.code == 2 and "--local-fall-area must be a number of square metres >= 0" in capsys.readouterr().err
 
 
 def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them(tmp_path):

@@ -258,6 +258,62 @@ def test_the_reduction_steps_carry_on_after_a_creep(monkeypatch, script, outcome
 
 
 
+@pytest.mark.parametrize("falls, area_limit, outcome, bracket, stood", [
+    # a block of 0.5 m^2 falls at 1.5 and comes to rest: the steps carry on, the slope stands at 2.0
+    ({"runout": (3, 2.0)}, 1.2, "stable", [2.0, None], [1.5]),
+    # a second block at 2.0 brings the fallen area to 1.0 m^2, under 1.2: both local
+    ({"runout": (3, 2.0), "runout_F2.000": (7, 5.0)}, 1.2, "stable", [2.0, None], [1.5, 2.0]),
+    # under a limit of 0.8 m^2 the two blocks together are the slope's failure, at 2.0
+    ({"runout": (3, 2.0), "runout_F2.000": (7, 5.0)}, 0.8, "failed", [1.5, 2.0], [1.5]),
+    # without a limit any fall ends the reduction (the default)
+    ({"runout": (3, 2.0)}, None, "failed", [1.25, 1.5], []),
+])
+def test_the_reduction_steps_carry_on_after_a_local_fall(monkeypatch, falls, area_limit, outcome, bracket, stood):
+    """A runout that came to rest with less than ``local_fall_area`` moved the failure
+    displacement (every fall so far together) lost a block off the face, not the slope: the
+    reduction carries on from its resting state and the bracket counts the factor as standing.
+    Each failing stage moves a node 0.3 m; its runout moves one 0.5 m^2 triangle by the metres
+    given (``falls``: stage -> (triangle, metres))."""
+    import types
+
+    from fdem.workflow import slope
+
+    x = TOPO.x0.copy()
+
+    def fake_run_stage(sim, st, journal=None):
+        if st.name in falls:
+            tri, metres = falls[st.name]
+            x[TOPO.triangles[tri]] += [-metres, 0.0]
+        if st.name.startswith("reduction") and f"runout{'' if st.reduction == 1.5 else f'_F{st.reduction:.3f}'}" in falls:
+            return stage(st.name, "failed", 0.3, st.reduction)
+        return stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+
+    monkeypatch.setattr(slope, "run_stage", fake_run_stage)
+    monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
+    sim = types.SimpleNamespace(time_capped=False, model=types.SimpleNamespace(topology=TOPO),
+                                state=types.SimpleNamespace(x=x))
+    cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
+    wf = slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0), local_fall_area=area_limit)
+    summary = {"stages": [], "fos": None, "failed_at_factor": None}
+
+    def record(result):
+        summary["stages"].append(result.as_dict())
+        return result
+
+    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
+                      slope.NO_DAMPING, None, None)
+    assert summary["outcome"] == outcome
+    assert factor_of_safety_figures(summary)["fos_bracket"] == bracket
+    assert [fall["factor"] for fall in summary.get("local_falls", [])] == stood
+    if stood:
+        assert summary["local_falls"][0]["area_m2"] == pytest.approx(0.5)
+        assert summary["local_falls"][0]["max_displacement_m"] == pytest.approx(2.0)
+    if outcome == "stable":
+        assert "a local fall at F = " in summary["ending"] and "stood at every factor to F = 2" in summary["ending"]
+    with pytest.raises(ValueError, match="local_fall_area"):
+        slope.SlopeWorkflow(local_fall_area=-1.0)
+
+
 def thrown_block(out_dir=None):
     """The checkpoint tests' 6 x 6 block thrown sideways, with a motion record of millimetres."""
     from fdem.mesh.topology import build_topology as topology
