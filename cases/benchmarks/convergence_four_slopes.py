@@ -29,6 +29,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from fdem.workflow.slope import steps_bracket
+
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "docs" / "cases" / "four_slopes_convergence.json"
 
@@ -81,14 +83,13 @@ def row(summary: dict) -> dict:
     """The convergence figures of one run's summary.json."""
     wf = summary.get("workflow") or {}
     fos = wf.get("fos") or {}
-    stable = [st["reduction"] for st in wf.get("stages", []) if st["reason"] == "converged"
-              and (st["name"].startswith("reduction") or st["name"] == "equilibrium")]
-    failed = wf.get("failed_at_factor")
-    if wf.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
-        stable.append(wf["crept_at_factor"])
-    # the last undamped stage: after a creep the reduction carries on, and a later one is runout_F<factor>
+    # the bracket of the steps: converged, crept and local-fall factors stand (one rule, the workflow's)
+    steps = steps_bracket(wf) if wf.get("stages") else [None, None]
+    # the last undamped stage: after a creep or a local fall the reduction carries on, and a later
+    # one is runout_F<factor>; its figures are the failure's only when the run failed
     runout_stage = next((st for st in reversed(wf.get("stages", [])) if st["name"].startswith("runout")), None)
-    went_to_rest = runout_stage is not None and runout_stage["reason"] == "converged"
+    went_to_rest = (runout_stage is not None and runout_stage["reason"] == "converged"
+                    and summary.get("outcome") in ("failed", "crept"))
     run = summary.get("runout", {})
     tags = summary.get("cracks_by_tag") or {}
     return {
@@ -96,7 +97,8 @@ def row(summary: dict) -> dict:
         "joint_offset": summary.get("joint_offset"), "extents_m": summary.get("extents_m"),
         "fos_bisection": fos.get("fos"), "bisection_bracket": fos.get("bracket"), "tolerance": fos.get("tolerance"),
         "n_trials": fos.get("n_trials"),
-        "steps_bracket": [max(stable) if stable else None, failed], "outcome": summary.get("outcome"),
+        "steps_bracket": steps, "outcome": summary.get("outcome"),
+        "local_falls": wf.get("local_falls", []),
         "runout_to_rest": went_to_rest,
         "failed_area_m2": run.get("displaced_area_m2") if went_to_rest else None,
         "area_moved_1m_m2": (summary.get("displaced_area_m2") or {}).get("1") if went_to_rest else None,

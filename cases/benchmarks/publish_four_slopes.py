@@ -28,6 +28,7 @@ import numpy as np
 
 from fdem.io.jsonable import write_json
 from fdem.results.analysis import boundary_motion, displaced_areas
+from fdem.workflow.slope import steps_bracket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from convergence_four_slopes import STOPPED  # noqa: E402  (one list of the outcomes of a run stopped part-way)
@@ -278,9 +279,13 @@ def figures(summary: dict, frame: dict | None = None) -> list[tuple[str, str]]:
     if any(st["name"].startswith("reduction_rate") or st["name"].startswith("rate") for st in stages):
         strength.append(f"the paper's rate to F = {wf.get('final_reduction', 0):.3g}")
     elif converged:
-        failed = wf.get("failed_at_factor")
-        strength.append(f"damped steps {max(converged + crept):.4g}-{'-' if failed is None else format(failed, '.4g')}"
-                        + (f", crept and stopped at {', '.join(format(c, '.4g') for c in crept)}" if crept else ""))
+        lo, failed = steps_bracket(wf)   # converged, crept and local-fall factors stand
+        falls = wf.get("local_falls") or []
+        strength.append(f"damped steps {lo:.4g}-{'-' if failed is None else format(failed, '.4g')}"
+                        + (f", crept and stopped at {', '.join(format(c, '.4g') for c in crept)}" if crept else "")
+                        + "".join(f", a block off the face at {f['factor']:.4g} ("
+                                  + ("area not recorded" if f.get("area_m2") is None else f"{f['area_m2']:.3g} m^2")
+                                  + f", {f['max_displacement_m']:.3g} m)" for f in falls))
     rows.append(("strength reduction", "; ".join(strength) or "-"))
     rows.append(("maximum displacement", f"{run.get('max_displacement_m', 0):.3g} m (D50 {run.get('p50_displacement_m', 0):.3g} m, "
                                          f"D90 {run.get('p90_displacement_m', 0):.3g} m of the displaced mass)"))

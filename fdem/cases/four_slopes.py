@@ -379,7 +379,11 @@ def main(argv=None) -> dict:
         args.tensile = "reduced"  # f_t was divided by F in every mode before --tensile existed
     if resuming and "--runout-dt-fraction" not in began_with:
         args.runout_dt_fraction = 0.4  # the runout's factor before it became 0.8
-    if args.local_fall_area is None:  # any fall ended the reduction before local falls were told apart
+    if args.local_fall_area is not None and args.reduction != "steps":
+        parser.error("--local-fall-area carries the reduction steps on after a block falls off the face; "
+                     "--reduction rate has no steps: leave it out")
+    if args.local_fall_area is None and args.reduction == "steps":
+        # any fall ended the reduction before local falls were told apart
         args.local_fall_area = 0.0 if resuming and "--local-fall-area" not in began_with else LOCAL_FALL_AREA
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
     try:
@@ -394,8 +398,8 @@ def main(argv=None) -> dict:
         parser.error(f"--elastic-band: side bands of {extents['boundary_band']:g} m are narrower than one element "
                      f"(--size {args.size:g} m) and would hold no crack element: widen --boundary-band")
     if not resuming:
-        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)),
-                  ("--local-fall-area", f"{args.local_fall_area:g}")] + [
+        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + (
+            [("--local-fall-area", f"{args.local_fall_area:g}")] if args.local_fall_area is not None else []) + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
         args.run_record["argv"] = list(args.run_record["argv"]) + [
             a for flag, value in pinned if flag not in args.run_record["argv"] for a in (flag, value)]

@@ -133,7 +133,8 @@ class CrackSet:
     topology : Topology
     property_sets : :class:`fdem.interfaces.Interfaces`, or a mapping ``tag -> CrackProperties``
         (or a sequence indexed by tag) wrapped into one; tag 0 is intact rock, ``j >= 1`` DFN
-        joint set ``j``. Every tag present in ``topology.crack_tag`` needs a set. The
+        joint set ``j``. Every tag of the elements (``tags``, by default
+        ``topology.crack_tag``) needs a set. The
         strength-reduction factor lives there (``cracks.interfaces.set_reduction(F)``) and
         reaches contact too.
     heterogeneity : Heterogeneity or None

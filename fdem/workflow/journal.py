@@ -84,6 +84,12 @@ class RunJournal:
             return "resume", runtime
         return "fresh", None
 
+    def ahead(self) -> bool:
+        """Whether the checkpoint's state lies beyond the stages replayed so far (a later stage
+        finished or in progress): the simulation is not in the state the last replayed stage
+        ended in, so nothing may be measured on it for that stage."""
+        return self._calls < len(self.done) or self.resume is not None
+
     def once(self, key: str, action: Callable[[], object]):
         """``action()`` the first time ``key`` is asked for, its recorded value on a replay."""
         if key not in self.marks:

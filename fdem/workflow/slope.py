@@ -46,7 +46,7 @@ from fdem.workflow.fos import (BracketError, GravityIncrease, check_bracket, def
                                fundamental_damping)
 
 __all__ = ["reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
-           "factor_of_safety_figures"]
+           "factor_of_safety_figures", "steps_bracket"]
 
 
 def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[float, ...]:
@@ -141,6 +141,10 @@ class SlopeWorkflow:
                 raise ValueError(f"SlopeWorkflow.{name} must lie in (0, 1), got {v!r}")
         for name in ("step_time", "fail_displacement", "runout_time", "local_fall_area"):
             _check_positive(self, name, optional=True)
+        if self.local_fall_area is not None and (self.reduction != "steps" or self.trigger != "strength"):
+            raise ValueError(f"SlopeWorkflow.local_fall_area carries the reduction steps on after a local fall; "
+                             f"with reduction = {self.reduction!r} and trigger = {self.trigger!r} there are none: "
+                             f"leave it unset")
         if self.runout_dt_fraction is not None and not (_real(self.runout_dt_fraction)
                                                         and 0.0 < self.runout_dt_fraction <= 1.0):
             raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got "
@@ -299,7 +303,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                 # reduction carries on from the resting state; one that runs on has failed, and
                 # that was its runout.
                 _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
-                _tell_local_fall(sim, wf, summary, fail.displacement)
+                _tell_local_fall(sim, wf, summary, fail.displacement, journal)
                 if summary.get("outcome") not in ("crept", "local_fall"):
                     return
                 summary.pop("outcome")
@@ -396,16 +400,21 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
                          f"(the failure displacement is {fail_displacement:.3g} m, 1 % of the height)")
 
 
-def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float) -> None:
+def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float, journal=None) -> None:
     """A failed runout that came to rest with less than ``wf.local_fall_area`` [m^2] of triangles
     whose centroid moved more than the failure displacement since the start (every fall so far
     counted together, so that a slope losing its face block by block fails once the blocks add
     up) is a local fall: a block off the face, not the slope. It is booked in ``local_falls``
-    (factor, area, largest displacement, time), its outcome is ``local_fall`` until the reduction
-    carries on from the resting state, ``failed_at_factor`` goes back to None, and the
-    reduction-step bracket reads the factor as one the slope stands at
+    (factor, area, the runout's largest displacement, time), its outcome is ``local_fall`` until
+    the reduction carries on from the resting state, ``failed_at_factor`` goes back to None, and
+    the reduction-step bracket reads the factor as one the slope stands at
     (:func:`factor_of_safety_figures`). A runout cut by its cap, or one whose mass ran off the
-    model, is no local fall."""
+    model, is no local fall.
+
+    The area is measured on the state the runout came to rest in, once: with a ``journal`` it is
+    recorded (mark ``local_fall:<runout>``), so that a resumed run, whose replayed runout returns
+    without stepping and leaves the simulation in a later state, takes the figure it measured
+    then instead of measuring the later state."""
     if wf.local_fall_area is None or summary.get("outcome") != "failed" or not summary["stages"]:
         return
     runout = summary["stages"][-1]
@@ -413,19 +422,29 @@ def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float) -> None:
         return
     from fdem.results.analysis import displaced
 
-    topology = sim.model.topology
-    area = float(topology.triangle_area0[displaced(topology, sim.state.x, fail_displacement)].sum())
-    if area >= wf.local_fall_area:
+    def measure() -> float:
+        topology = sim.model.topology
+        return float(topology.triangle_area0[displaced(topology, sim.state.x, fail_displacement)].sum())
+
+    key = f"local_fall:{runout['name']}"
+    if journal is not None and key not in journal.marks and journal.ahead():
+        # a replay past this runout, by a run whose journal holds no measure of it: the run
+        # carried on from it, so it was told a local fall then; the later state cannot say its area
+        area = journal.marks[key] = None
+    else:
+        area = journal.once(key, measure) if journal is not None else measure()
+    if area is not None and area >= wf.local_fall_area:
         return
     factor = summary["failed_at_factor"]
-    moved = float(np.linalg.norm(sim.state.x - topology.x0, axis=1).max())
+    moved = float(runout["max_displacement"])
     summary.setdefault("local_falls", []).append({"factor": factor, "area_m2": area, "max_displacement_m": moved,
                                                   "at_rest_s": float(runout["t_end"])})
     summary["outcome"] = "local_fall"
     summary["failed_at_factor"] = None
-    summary["ending"] = (f"a local fall at F = {factor:.4g}: {area:.3g} m^2 moved more than {fail_displacement:.3g} m "
-                         f"(at most {moved:.3g} m) and came to rest at t = {runout['t_end']:.4g} s, under the "
-                         f"local-fall area {wf.local_fall_area:.3g} m^2: a block off the face, not the slope")
+    summary["ending"] = (f"a local fall at F = {factor:.4g}: {'an unrecorded area' if area is None else f'{area:.3g} m^2'}"
+                         f" moved more than {fail_displacement:.3g} m (at most {moved:.3g} m) and came to rest at "
+                         f"t = {runout['t_end']:.4g} s, under the local-fall area {wf.local_fall_area:.3g} m^2: a block "
+                         f"off the face, not the slope")
 
 
 def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:
@@ -495,18 +514,22 @@ def factor_of_safety_figures(result: dict) -> dict:
     converged, factor at which it failed]``, with ``fos`` its middle (``None`` if it never failed)."""
     if result.get("fos"):
         return {"fos": result["fos"]["fos"], "fos_bracket": result["fos"]["bracket"], "fos_method": "bisection"}
+    lo, failing = steps_bracket(result)
+    return {"fos": None if lo is None or failing is None else 0.5 * (lo + failing), "fos_bracket": [lo, failing],
+            "fos_method": "reduction steps"}
+
+
+def steps_bracket(result: dict) -> list:
+    """``[largest factor the slope stood at, factor at which it failed]`` of the reduction steps
+    of a workflow summary (either ``None`` when there is none): it stands where a damped stage
+    converged, where it crept and came to rest, and where it lost only a block off its face."""
     stable = [st["reduction"] for st in result["stages"]
               if st["name"].startswith("reduction") or st["name"] == "equilibrium"
               if st["reason"] == "converged"]
     if result.get("crept_at_factor") is not None:  # crept and came to rest: it stands there
         stable.append(result["crept_at_factor"])
     stable += [fall["factor"] for fall in result.get("local_falls", [])]  # lost a block and stood
-    failing = result.get("failed_at_factor")
-    if failing is None or not stable:
-        return {"fos": None, "fos_bracket": [max(stable) if stable else None, failing],
-                "fos_method": "reduction steps"}
-    lo = max(stable)
-    return {"fos": 0.5 * (lo + failing), "fos_bracket": [lo, failing], "fos_method": "reduction steps"}
+    return [max(stable) if stable else None, result.get("failed_at_factor")]
 
 
 def final_factor(wf: SlopeWorkflow) -> float:

@@ -223,6 +223,9 @@ def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_ba
     with pytest.raises(SystemExit) as exit_:
         four_slopes.main(["--local-fall-area", "-1", "--out", str(tmp_path / "y")])
     assert exit_.value.code == 2 and "--local-fall-area must be a number of square metres >= 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:  # the paper's rate has no steps to carry on
+        four_slopes.main(["--reduction", "rate", "--local-fall-area", "5", "--out", str(tmp_path / "z")])
+    assert exit_.value.code == 2 and "--reduction rate has no steps" in capsys.readouterr().err
 
 
 def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them(tmp_path):

@@ -278,15 +278,26 @@ def test_the_reduction_steps_carry_on_after_a_local_fall(monkeypatch, falls, are
 
     from fdem.workflow import slope
 
+    from fdem.workflow.journal import RunJournal
+
     x = TOPO.x0.copy()
 
     def fake_run_stage(sim, st, journal=None):
+        kind, saved = journal.next_stage(st.name) if journal is not None else ("fresh", None)
+        if kind == "done":  # a replay: the state is the checkpoint's, the result the recorded one
+            return StageResult(**saved)
         if st.name in falls:
             tri, metres = falls[st.name]
             x[TOPO.triangles[tri]] += [-metres, 0.0]
         if st.name.startswith("reduction") and f"runout{'' if st.reduction == 1.5 else f'_F{st.reduction:.3f}'}" in falls:
-            return stage(st.name, "failed", 0.3, st.reduction)
-        return stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+            result = stage(st.name, "failed", 0.3, st.reduction)
+        elif st.name in falls:
+            result = stage(st.name, "converged", falls[st.name][1], 0.0)
+        else:
+            result = stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+        if journal is not None:
+            journal.stage_finished(sim, result.as_dict())
+        return result
 
     monkeypatch.setattr(slope, "run_stage", fake_run_stage)
     monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
@@ -294,24 +305,42 @@ def test_the_reduction_steps_carry_on_after_a_local_fall(monkeypatch, falls, are
                                 state=types.SimpleNamespace(x=x))
     cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
     wf = slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0), local_fall_area=area_limit)
-    summary = {"stages": [], "fos": None, "failed_at_factor": None}
 
-    def record(result):
-        summary["stages"].append(result.as_dict())
-        return result
+    def run(journal):
+        summary = {"stages": [], "fos": None, "failed_at_factor": None}
 
-    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
-                      slope.NO_DAMPING, None, None)
+        def record(result):
+            summary["stages"].append(result.as_dict())
+            return result
+
+        slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
+                          slope.NO_DAMPING, None, journal)
+        return summary
+
+    journal = RunJournal()
+    summary = run(journal)
+    # resumed from the end state (every stage replayed, the state the last one's): the same
+    # verdicts and figures, each fall's area the one measured when its runout came to rest
+    again = RunJournal()
+    again.done, again.marks = list(journal.done), dict(journal.marks)
+    replayed = run(again)
+    assert (replayed["outcome"], replayed.get("local_falls")) == (summary["outcome"], summary.get("local_falls"))
+    if stood:  # a journal that holds no measure (written before it was kept) still carries on past a fall
+        blind = RunJournal()
+        blind.done = list(journal.done)
+        assert run(blind)["outcome"] == outcome
     assert summary["outcome"] == outcome
     assert factor_of_safety_figures(summary)["fos_bracket"] == bracket
     assert [fall["factor"] for fall in summary.get("local_falls", [])] == stood
     if stood:
         assert summary["local_falls"][0]["area_m2"] == pytest.approx(0.5)
-        assert summary["local_falls"][0]["max_displacement_m"] == pytest.approx(2.0)
+        assert summary["local_falls"][0]["max_displacement_m"] == pytest.approx(2.0)   # the runout's own
     if outcome == "stable":
         assert "a local fall at F = " in summary["ending"] and "stood at every factor to F = 2" in summary["ending"]
     with pytest.raises(ValueError, match="local_fall_area"):
         slope.SlopeWorkflow(local_fall_area=-1.0)
+    with pytest.raises(ValueError, match="local_fall_area carries the reduction steps on"):
+        slope.SlopeWorkflow(reduction="rate", local_fall_area=10.0)
 
 
 def thrown_block(out_dir=None):
