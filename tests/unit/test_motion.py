@@ -207,6 +207,27 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
         assert "0.036 m" in summary["ending"] and "longer runout cap" in summary["ending"]
 
 
+def scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal=None) -> dict:
+    """The workflow's reduction steps with ``fake_run_stage`` in place of the solver (its
+    equilibrium undamped): the summary of :func:`fdem.workflow.slope._run_stages`."""
+    import types
+
+    from fdem.workflow import slope
+
+    monkeypatch.setattr(slope, "run_stage", fake_run_stage)
+    monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
+    cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
+    summary = {"stages": [], "fos": None, "failed_at_factor": None}
+
+    def record(result):
+        summary["stages"].append(result.as_dict())
+        return result
+
+    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
+                      slope.NO_DAMPING, None, journal)
+    return summary
+
+
 @pytest.mark.parametrize("script, outcome, bracket, names", [
     # creeps at 1.5 and comes to rest; the steps carry on and it fails at 2.0
     ({"reduction_F1.500": ("capped", 0.03), "runout": ("converged", 0.006),
@@ -237,19 +258,8 @@ def test_the_reduction_steps_carry_on_after_a_creep(monkeypatch, script, outcome
         reason, moved = script.get(st.name, ("converged", 1e-3))
         return stage(st.name, reason, moved, st.reduction if st.reduction is not None else 0.0)
 
-    monkeypatch.setattr(slope, "run_stage", fake_run_stage)
-    monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
-    sim = types.SimpleNamespace(time_capped=False)
-    cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
-    wf = slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0))
-    summary = {"stages": [], "fos": None, "failed_at_factor": None}
-
-    def record(result):
-        summary["stages"].append(result.as_dict())
-        return result
-
-    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
-                      slope.NO_DAMPING, None, None)
+    summary = scripted_workflow(monkeypatch, fake_run_stage, types.SimpleNamespace(time_capped=False),
+                                slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0)))
     assert [st["name"] for st in summary["stages"]] == names
     assert summary["outcome"] == outcome
     assert factor_of_safety_figures(summary)["fos_bracket"] == bracket
@@ -299,23 +309,12 @@ def test_the_reduction_steps_carry_on_after_a_local_fall(monkeypatch, falls, are
             journal.stage_finished(sim, result.as_dict())
         return result
 
-    monkeypatch.setattr(slope, "run_stage", fake_run_stage)
-    monkeypatch.setattr(slope, "equilibrium_damping", lambda sim: slope.NO_DAMPING)
     sim = types.SimpleNamespace(time_capped=False, model=types.SimpleNamespace(topology=TOPO),
                                 state=types.SimpleNamespace(x=x))
-    cracks = types.SimpleNamespace(hold_elastic=lambda held: None)
     wf = slope.SlopeWorkflow(factors=(1.25, 1.5, 2.0), local_fall_area=area_limit)
 
     def run(journal):
-        summary = {"stages": [], "fos": None, "failed_at_factor": None}
-
-        def record(result):
-            summary["stages"].append(result.as_dict())
-            return result
-
-        slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
-                          slope.NO_DAMPING, None, journal)
-        return summary
+        return scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal)
 
     journal = RunJournal()
     summary = run(journal)
