@@ -307,6 +307,14 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
     }
 
 
+def local_fall_line(fall: dict) -> str:
+    """One line on a local fall of ``summary.json`` ``local_falls`` (its area is ``None`` when a
+    run resumed from a journal written before the area was kept)."""
+    area = "an unrecorded area" if fall.get("area_m2") is None else f"{fall['area_m2']:.3g} m^2"
+    return (f"local fall at F = {fall['factor']:.3f}: {area} moved (at most {fall['max_displacement_m']:.3g} m), "
+            f"at rest at t = {fall['at_rest_s']:.4g} s; the reduction carried on")
+
+
 def main(argv=None) -> dict:
     parser = case_parser(__doc__, name=NAME, out="runs/four_slopes", size=SIZE,
                          size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
@@ -500,6 +508,7 @@ def main(argv=None) -> dict:
         if summary["outcome"] == "write_error":
             finish_run(out, summary)
             return summary
+        write_json(out / "summary.json", summary)  # before the printing below: nothing printed can lose it
         for st in result["stages"]:
             say(f"  {st['name']:>20s}: {st['reason']:9s} t {st['t_start']:.3f}-{st['t_end']:.3f} s, "
                   f"{st['steps']} steps, {st['wall_seconds']:.1f} s wall, max disp {st['max_displacement']:.3g} m")
@@ -508,8 +517,7 @@ def main(argv=None) -> dict:
               + (f"; factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "
                  f"{summary['fos_bracket'][1]:.3f}, {summary['fos_method']})" if summary.get("fos") else ""))
         for fall in summary["local_falls"]:
-            print(f"local fall at F = {fall['factor']:.3f}: {fall['area_m2']:.3g} m^2 moved (at most "
-                  f"{fall['max_displacement_m']:.3g} m), at rest at t = {fall['at_rest_s']:.4g} s; the reduction carried on")
+            print(local_fall_line(fall))
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "
               f"{summary['cracks']['broken']} crack elements broken; max displacement "
               f"{summary['runout']['max_displacement_m']:.3g} m; see {out / 'slope.pvd'}")

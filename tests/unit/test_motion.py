@@ -340,6 +340,14 @@ def test_the_reduction_steps_carry_on_after_a_local_fall(monkeypatch, falls, are
         slope.SlopeWorkflow(local_fall_area=-1.0)
     with pytest.raises(ValueError, match="local_fall_area carries the reduction steps on"):
         slope.SlopeWorkflow(reduction="rate", local_fall_area=10.0)
+    # the run's printed line, an area unrecorded by an older journal included
+    from fdem.cases.four_slopes import local_fall_line
+
+    for fall in summary.get("local_falls", []) + [{"factor": 1.5, "area_m2": None, "max_displacement_m": 2.0,
+                                                   "at_rest_s": 1.0}]:
+        line = local_fall_line(fall)
+        assert line.startswith(f"local fall at F = {fall['factor']:.3f}: ")
+        assert ("an unrecorded area" in line) == (fall["area_m2"] is None)
 
 
 def thrown_block(out_dir=None):
