@@ -47,7 +47,7 @@ from fdem.geometry.polygons import ground_surface, simple_slope
 from fdem.physics.crack_properties import CrackProperties
 from fdem.io.jsonable import write_json
 
-__all__ = ["four_slope_property_sets", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
+__all__ = ["four_slope_property_sets", "RUN_EXTENTS", "EXTENTS_BEFORE_PINNING", "resolve_extents", "keep_settings_of_then", "FOUR_SLOPE_HEIGHT", "FOUR_SLOPE_FACE_ANGLE", "FOUR_SLOPE_JOINT_DIP",
            "FOUR_SLOPE_SPACING", "four_slope_geometry", "NAME", "CONTACT_PENALTY", "GRAVITY", "SIZE", "build",
            "ground_surface", "simulation", "scene", "main", "YOUNG", "POISSON", "DENSITY"]
 
@@ -315,6 +315,27 @@ def local_fall_line(fall: dict) -> str:
             f"at rest at t = {fall['at_rest_s']:.4g} s; the reduction carried on")
 
 
+def keep_settings_of_then(args, began_with: list[str] | None) -> None:
+    """Give a resumed run the settings it began with where its ``run.json`` does not name them.
+
+    A run's options are pinned into its ``run.json`` when it begins; a run begun before an option
+    existed ran with the behaviour of then, and carrying it on with today's default would change
+    its physics half-way. ``began_with`` is the recorded argv (``None`` for a new run, which
+    takes today's defaults): without ``--tensile`` f_t was divided by F in every mode; without
+    ``--runout-dt-fraction`` the runout stepped at 0.4 of the stable step; without
+    ``--local-fall-area`` any fall ended the reduction steps (0). A new run under the damped
+    steps gets :data:`LOCAL_FALL_AREA`.
+    """
+    if began_with is not None:
+        if "--tensile" not in began_with:
+            args.tensile = "reduced"
+        if "--runout-dt-fraction" not in began_with:
+            args.runout_dt_fraction = 0.4
+    if args.local_fall_area is None and args.reduction == "steps":
+        then = began_with is not None and "--local-fall-area" not in began_with
+        args.local_fall_area = 0.0 if then else LOCAL_FALL_AREA
+
+
 def main(argv=None) -> dict:
     parser = case_parser(__doc__, name=NAME, out="runs/four_slopes", size=SIZE,
                          size_help=f"element size [m] (default {SIZE}; 0.18 gives ~180k triangles)")
@@ -379,20 +400,12 @@ def main(argv=None) -> dict:
     if args.local_fall_area is not None and not (math.isfinite(args.local_fall_area) and args.local_fall_area >= 0):
         parser.error(f"--local-fall-area must be a number of square metres >= 0 (0: any fall ends the reduction), "
                      f"got {args.local_fall_area}")
-    # a run keeps the settings it began with: a resumed run's run.json names them (written below),
-    # and one begun before they were written there ran with the defaults of then
     resuming = getattr(args, "resume", None) is not None
     began_with = list(args.run_record.get("argv", [])) + list(args.run_record.get("resumed_with", []))
-    if resuming and "--tensile" not in began_with:
-        args.tensile = "reduced"  # f_t was divided by F in every mode before --tensile existed
-    if resuming and "--runout-dt-fraction" not in began_with:
-        args.runout_dt_fraction = 0.4  # the runout's factor before it became 0.8
     if args.local_fall_area is not None and args.reduction != "steps":
         parser.error("--local-fall-area carries the reduction steps on after a block falls off the face; "
                      "--reduction rate has no steps: leave it out")
-    if args.local_fall_area is None and args.reduction == "steps":
-        # any fall ended the reduction before local falls were told apart
-        args.local_fall_area = 0.0 if resuming and "--local-fall-area" not in began_with else LOCAL_FALL_AREA
+    keep_settings_of_then(args, began_with if resuming else None)
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
     try:
         extents = resolve_extents(args.angle, {k: getattr(args, k) for k in EXTENTS_BEFORE_PINNING},

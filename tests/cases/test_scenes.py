@@ -258,6 +258,30 @@ def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them
     assert summary["extents_m"] == low
 
 
+@pytest.mark.parametrize("reduction", ["steps", "rate"])
+def test_a_resumed_four_slope_run_keeps_the_settings_it_began_with(reduction):
+    """A run begun before --tensile, --runout-dt-fraction and --local-fall-area existed resumes
+    with the behaviour of then (f_t divided by F, a runout step of 0.4, any fall the slope's
+    failure), one that named them keeps its values, and a new run takes today's defaults."""
+    from argparse import Namespace
+
+    from fdem.cases import four_slopes as fs
+
+    def settled(began_with, **given):
+        args = Namespace(**{"tensile": None, "runout_dt_fraction": 0.8, "local_fall_area": None,
+                            "reduction": reduction, **given})
+        fs.keep_settings_of_then(args, began_with)
+        return args.tensile, args.runout_dt_fraction, args.local_fall_area
+
+    steps_area = 0.0 if reduction == "steps" else None  # the rate has no steps to carry on
+    assert settled(["--angle", "high"]) == ("reduced", 0.4, steps_area)
+    pinned = ["--tensile", "kept", "--runout-dt-fraction", "0.8", "--local-fall-area", "11.25"]
+    assert settled(pinned, tensile="kept", local_fall_area=11.25 if reduction == "steps" else None) == (
+        "kept", 0.8, 11.25 if reduction == "steps" else None)
+    assert settled(None) == (None, 0.8, fs.LOCAL_FALL_AREA if reduction == "steps" else None)
+    assert fs.LOCAL_FALL_AREA == pytest.approx(0.1 * fs.FOUR_SLOPE_HEIGHT ** 2 / 2)  # a tenth of the 45 deg face wedge
+
+
 def test_four_slopes_side_bands_go_into_the_scene_file(tmp_path):
     """``--boundary-band`` writes ``side_band`` into the joint set, and the scene builds the same
     joint traces as the case: none within the band of either boundary."""
