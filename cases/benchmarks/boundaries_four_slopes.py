@@ -74,8 +74,9 @@ def command(out: Path, angle: str, spacing: str, size: str, crest: float, band: 
     argv = exe + ["--angle", angle, "--spacing", spacing, "--size", size, "--fos", *map(str, fos),
                   "--crest-length", f"{crest:g}", "--toe-length", f"{toe:g}", "--base-depth", f"{base:g}",
                   "--boundary-band", f"{band or 0:g}"] + (["--elastic-band"] if elastic else [])
-    # only the bracket and its mechanism matter here: a short runout
-    return argv + ["--runout-time", "0.5", "--threads", "1", "--quiet", "--yes", "--out", str(out)]
+    # only the bracket and its mechanism (the first failing trial's picture) matter here: the search
+    # is the whole run (runs begun before --reduction none went on down the steps to a 0.5 s runout)
+    return argv + ["--reduction", "none", "--threads", "1", "--quiet", "--yes", "--out", str(out)]
 
 
 def row(summary: dict, fos_json: dict | None) -> dict:

@@ -175,8 +175,9 @@ def main(argv=None) -> list[dict]:
                         help="persistent joints relative to the toe, a fraction of the spacing, for every run "
                              "(fdem run four-slopes --joint-offset; default each spacing's own); the folders "
                              "get the suffix _offset<FRACTION>")
-    parser.add_argument("--reduction", choices=["steps", "rate"], default=None,
-                        help="the reduction schedule of every run (default the case's: damped steps)")
+    parser.add_argument("--reduction", choices=["steps", "rate", "none"], default=None,
+                        help="the reduction schedule of every run (default the case's: damped steps; none: the "
+                             "bisection alone, without the steps bracket)")
     parser.add_argument("--root", type=Path, default=Path("runs/convergence"))
     parser.add_argument("--table-only", action="store_true", help="run nothing: the table of the finished runs")
     args = parser.parse_args(argv)

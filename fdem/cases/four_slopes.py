@@ -360,8 +360,10 @@ def main(argv=None) -> dict:
                         help="make the side bands elastic: their crack elements never soften or break, a far "
                              "field that carries the rollers' load, instead of intact rock with its strength "
                              "(shows whether the boundaries take part; needs a band)")
-    parser.add_argument("--reduction", choices=["steps", "rate"], default="steps",
-                        help="strength reduction in damped steps of 10 %% (default) or at the paper's rate")
+    parser.add_argument("--reduction", choices=["steps", "rate", "none"], default="steps",
+                        help="strength reduction in damped steps of 10 %% (default), at the paper's rate, or none: "
+                             "the --fos search is the whole analysis (a bracket for a convergence or boundary study, "
+                             "without the schedule after it)")
     parser.add_argument("--tensile", choices=["reduced", "kept"], default=None,
                         help="whether strength reduction divides the tensile strength f_t by F too (default: "
                              "reduced with --reduction steps, kept with --reduction rate: the paper reduces the "
@@ -403,8 +405,10 @@ def main(argv=None) -> dict:
     resuming = getattr(args, "resume", None) is not None
     began_with = list(args.run_record.get("argv", [])) + list(args.run_record.get("resumed_with", []))
     if args.local_fall_area is not None and args.reduction != "steps":
-        parser.error("--local-fall-area carries the reduction steps on after a block falls off the face; "
-                     "--reduction rate has no steps: leave it out")
+        parser.error(f"--local-fall-area carries the reduction steps on after a block falls off the face; "
+                     f"--reduction {args.reduction} has no steps: leave it out")
+    if args.reduction == "none" and not args.fos:
+        parser.error("--reduction none makes the factor-of-safety search the whole analysis: give --fos LOWER UPPER TOL")
     keep_settings_of_then(args, began_with if resuming else None)
     tensile = args.tensile or ("kept" if args.reduction == "rate" else "reduced")
     try:

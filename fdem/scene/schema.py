@@ -167,7 +167,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "kind": Key("str", "what the run does: strength reduction to failure, or gravity increase (fos is then the "
                            "gravity-factor bracket, required)", default="strength-reduction",
                     choices=("strength-reduction", "gravity-increase")),
-        "reduction": Key("str", "damped steps of 10 % or the paper's rate", default="steps", choices=("steps", "rate")),
+        "reduction": Key("str", "damped steps of 10 %, the paper's rate, or none (the fos search is the whole analysis)",
+                         default="steps", choices=("steps", "rate", "none")),
         "factors": Key("floats", "reduction factors F of the steps (default 1/0.9 ... 1/0.3)"),
         "reduction_rate": _f("fall of the strength 1/F per second (rate) [1/s]", 5.0, **POSITIVE),
         "final_strength": _f("strength 1/F the rate mode stops at [-]", 0.3, low=0.0, high=1.0, open_low=True,

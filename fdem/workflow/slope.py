@@ -63,7 +63,10 @@ class SlopeWorkflow:
     """Settings of :func:`run_slope_workflow` (times in simulated seconds; ``None``: from the
     model's response time ``T``, :func:`fdem.workflow.stages.response_time`).
 
-    reduction : ``"steps"`` (damped equilibrium at each factor; default) or ``"rate"``
+    reduction : ``"steps"`` (damped equilibrium at each factor; default), ``"rate"``, or
+        ``"none"``: the factor-of-safety search (``fos``, required) is the whole analysis, and the
+        run ends after it, outcome ``searched`` (a convergence or boundary study reads only the
+        bracket, and a schedule after it would cost as much again)
     factors : the factors ``F`` of the steps (default :func:`reduction_steps`: 1/0.9 ... 1/0.3)
     reduction_rate : fall of the strength ``1/F`` per second in ``"rate"`` mode (paper: 5 /s)
     final_strength : the strength ``1/F`` the rate mode stops at (paper: 0.3)
@@ -123,8 +126,11 @@ class SlopeWorkflow:
         if self.trigger == "gravity" and self.fos is None:
             raise ValueError("SlopeWorkflow.trigger = 'gravity' needs fos = (lower, upper, tol), the gravity-factor "
                              "bracket of the critical factor's search")
-        if self.reduction not in ("steps", "rate"):
-            raise ValueError(f"SlopeWorkflow.reduction must be 'steps' or 'rate', got {self.reduction!r}")
+        if self.reduction not in ("steps", "rate", "none"):
+            raise ValueError(f"SlopeWorkflow.reduction must be 'steps', 'rate' or 'none', got {self.reduction!r}")
+        if self.reduction == "none" and (self.fos is None or self.trigger != "strength"):
+            raise ValueError("SlopeWorkflow.reduction = 'none' runs the factor-of-safety search alone: it needs "
+                             "fos = (lower, upper, tol) and the strength trigger")
         try:
             factors = tuple(self.factors)
         except TypeError:
@@ -199,8 +205,9 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
                        journal=None) -> dict:
     """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
     values: every stage's result, the factor of safety when searched (``FoSResult.as_dict()``),
-    the factor at failure and the state the run ended in (``stable``, ``failed``,
-    ``time_capped``, ``interrupted`` or ``unstable``, with ``ending`` saying why).
+    the factor at failure and the state the run ended in (``stable``, ``failed``, ``crept``,
+    ``undecided``, ``searched``, ``time_capped``, ``interrupted``, ``write_error`` or
+    ``unstable``, with ``ending`` saying why).
     ``journal``: a :class:`fdem.workflow.journal.RunJournal` to write resumable checkpoints
     (and, loaded from one, to continue where it stopped)."""
     wf = workflow or SlopeWorkflow()
@@ -285,6 +292,9 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                 sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal).as_dict())
                 if journal is not None
                 else factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict())
+        if wf.reduction == "none":
+            _tell_searched(summary)
+            return
         if wf.reduction == "steps":
             for F in wf.factors:
                 r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
@@ -321,6 +331,17 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
     if summary["outcome"] == "failed":
         _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
+
+
+def _tell_searched(summary: dict) -> None:
+    """The ending of a run whose analysis is the factor-of-safety search (``reduction = "none"``):
+    outcome ``searched``, the bracket in words; the state is the equilibrium at ``F = 1`` the
+    trials started from."""
+    fos = summary["fos"]
+    lo, hi = fos["bracket"]
+    summary["outcome"] = "searched"
+    summary["ending"] = (f"factor of safety {fos['fos']:.4g} (stable at {lo:.4g}, not at {hi:.4g}; "
+                         f"{fos['n_trials']} trials): the search was the analysis (reduction 'none')")
 
 
 def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> None:
@@ -534,7 +555,10 @@ def steps_bracket(result: dict) -> list:
 
 def final_factor(wf: SlopeWorkflow) -> float:
     """The strength-reduction factor a schedule ends at: ``1 / final_strength`` at the rate,
-    the last of ``factors`` in steps (both 1/0.3 by default)."""
+    the last of ``factors`` in steps (both 1/0.3 by default), the search's upper factor when the
+    search is the analysis (``"none"``)."""
+    if wf.reduction == "none":
+        return float(wf.fos[1])
     return 1.0 / wf.final_strength if wf.reduction == "rate" else float(wf.factors[-1])
 
 

@@ -226,6 +226,12 @@ def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_ba
     with pytest.raises(SystemExit) as exit_:  # the paper's rate has no steps to carry on
         four_slopes.main(["--reduction", "rate", "--local-fall-area", "5", "--out", str(tmp_path / "z")])
     assert exit_.value.code == 2 and "--reduction rate has no steps" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:  # a search alone needs its bracket
+        four_slopes.main(["--reduction", "none", "--out", str(tmp_path / "z")])
+    assert exit_.value.code == 2 and "give --fos LOWER UPPER TOL" in capsys.readouterr().err
+    path = tmp_path / "search.toml"  # and a scene file says the same
+    four_slopes.main(["--reduction", "none", "--fos", "1.0", "2.0", "0.1", "--write-scene", str(path)])
+    assert workflow(read_scene(path)).reduction == "none"
 
 
 def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them(tmp_path):

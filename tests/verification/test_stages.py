@@ -194,6 +194,31 @@ def test_ledger_closes_through_a_reduction_schedule_with_breakage_and_contact():
     assert summary["stages"][-1]["name"] == "runout"
 
 
+def test_a_search_alone_ends_after_its_bracket_with_the_limit_equilibrium_factor():
+    """``reduction = "none"``: the factor-of-safety search is the whole analysis. Its bracket is
+    the planar slope's Hoek-Bray factor (1.396) within the verification tolerance of 10 %, and
+    nothing runs after it: no reduction stage, no runout, the state the equilibrium at F = 1
+    that every trial started from."""
+    with pytest.raises(ValueError, match="needs fos"):
+        SlopeWorkflow(reduction="none")
+    with pytest.raises(ValueError, match="strength trigger"):
+        SlopeWorkflow(reduction="none", fos=(1.0, 2.0, 0.1), trigger="gravity")
+    s = planar_slope_scene()
+    sim = s.sim
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"])
+    summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1)))
+    assert summary["outcome"] == "searched" and summary["failed_at_factor"] is None
+    assert [st["name"] for st in summary["stages"]] == ["equilibrium"]
+    lo, hi = summary["fos"]["bracket"]
+    assert hi - lo <= 0.1 and summary["fos"]["fos"] == pytest.approx(le.fos, rel=0.10), (summary["fos"], le.fos)
+    assert f"{summary['fos']['fos']:.4g}" in summary["ending"]
+    # the trials restore their start state and keep no history rows: every row is the equilibrium's
+    assert {row["stage"] for row in sim.history} == {"equilibrium"}
+    equilibrium = summary["stages"][0]
+    assert sim.state.time == pytest.approx(equilibrium["t_end"])  # back where the trials started
+    assert np.abs(sim.state.x - sim.model.topology.x0[sim.model.topology.triangles].reshape(-1, 2)).max() < 1e-3
+
+
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
     """Planar block, c = 20 kPa, phi = 30 deg on a 35 deg plane: limit equilibrium fails when
     gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
