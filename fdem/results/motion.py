@@ -26,7 +26,13 @@ centroid has travelled ``move_distance`` from there. At the end of a run this te
   status (intact, activated, broken) kept each time ``D90`` grows by ``sqrt(2)``, so the one
   nearest half the final ``D90`` can be drawn after the run (the paper's Fig. 3 shows a slope
   mid-failure and at rest). Snapshots below a quarter of the present ``D90`` are dropped (they
-  can no longer be the nearest to half the final one), so at most five are kept.
+  can no longer be the nearest to half the final one), so at most five are kept. The picture is
+  of the failure the run ended in: when the reduction carries on after a runout (a creep or a
+  block off the face that came to rest, :func:`fdem.workflow.slope._run_stages`), the snapshots
+  start again from the state it carries on from, their ``D90`` measured from there (the locked
+  part keeps the whole run's displacement). The high-angle coarse slope lost a 2.7 m^2 toe block
+  at F = 1.43 (D90 9.1 m) and collapsed at F = 3.33 (D90 15.3 m): measured from the start, the
+  toe block's fall was the snapshot nearest half the collapse's D90.
 
 ``move_distance`` (default a quarter of ``threshold``, 2.5 cm) is a distance, not a speed: an
 elastic ringing of millimetres never counts as motion, a block sliding at any speed re-anchors
@@ -121,14 +127,20 @@ class MotionRecord:
         self.since_step: int | None = None  # the row the record began at (a resume of an older run: later)
         self.snapshots: list[dict] = []
         self._next_level = self.threshold
+        self.origin = self._c0  # centroids the snapshots' D90 is measured from: the state the present failure began at
+        self.last_stage = ""  # the stage of the last row booked (a trial's rows are not booked)
 
     def _centroids(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(x)[self._tri].mean(axis=1)
 
     def d90(self, x: np.ndarray) -> float:
         """90th area percentile of the displacement of the triangles displaced more than
-        ``threshold`` [m] (0 when none is)."""
-        d = np.linalg.norm(self._centroids(x) - self._c0, axis=1)
+        ``threshold`` [m] (0 when none is), measured from :attr:`origin`: the start, or the state
+        the reduction last carried on from after a runout (the present failure's ``D90``)."""
+        return self._d90_from(self._centroids(x), self.origin)
+
+    def _d90_from(self, c: np.ndarray, origin: np.ndarray) -> float:
+        d = np.linalg.norm(c - origin, axis=1)
         failed = d > self.threshold
         return weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
 
@@ -139,8 +151,14 @@ class MotionRecord:
         d = np.linalg.norm(c - self._c0, axis=1)
         failed = d > self.threshold
         d90 = weighted_percentile(d[failed], self._area[failed], 90.0) if failed.any() else 0.0
-        if str(getattr(sim, "stage", "")).startswith("trial"):
+        stage = str(getattr(sim, "stage", ""))
+        if stage.startswith("trial"):
             return d90  # a trial restarts from a restored state: its motion is not the run's
+        if stage.startswith("reduction") and self.last_stage.startswith("runout"):
+            # the reduction carries on after a runout that came to rest: a new failure, if any,
+            # is measured and pictured from here
+            self.origin, self.snapshots, self._next_level = c.copy(), [], self.threshold
+        self.last_stage = stage
         if self.anchor is None:
             self.anchor = c.copy()
             self.since_step = int(sim.state.step)
@@ -149,8 +167,9 @@ class MotionRecord:
         self.anchor[moved] = c[moved]
         self.moved_time[moved] = sim.state.time
         self.moved_d90[moved] = d90
-        if d90 >= self._next_level:
-            self._snapshot(sim, d90)
+        present = d90 if self.origin is self._c0 else self._d90_from(c, self.origin)
+        if present >= self._next_level:
+            self._snapshot(sim, present)
         return d90
 
     def _snapshot(self, sim, d90: float) -> None:
@@ -214,7 +233,8 @@ class MotionRecord:
     def state_dict(self) -> dict:
         return {"anchor": None if self.anchor is None else self.anchor.copy(), "moved_time": self.moved_time.copy(),
                 "moved_d90": self.moved_d90.copy(), "since_step": self.since_step,
-                "next_level": float(self._next_level), "snapshots": [dict(s) for s in self.snapshots]}
+                "next_level": float(self._next_level), "snapshots": [dict(s) for s in self.snapshots],
+                "origin": None if self.origin is self._c0 else self.origin.copy(), "last_stage": self.last_stage}
 
     def load_state_dict(self, d: dict) -> None:
         n = len(self._tri)
@@ -225,6 +245,10 @@ class MotionRecord:
         self.moved_d90 = np.array(d["moved_d90"], dtype=np.float64)
         self.since_step = None if d["since_step"] is None else int(d["since_step"])
         self._next_level = float(d["next_level"])
+        # a record saved before the origin was kept measured every failure from the start
+        origin = d.get("origin")
+        self.origin = self._c0 if origin is None else np.array(origin, dtype=np.float64)
+        self.last_stage = str(d.get("last_stage", ""))
         self.snapshots = [{"time": float(s["time"]), "step": int(s["step"]), "d90": float(s["d90"]),
                            "x": np.asarray(s["x"], np.float32), "status": np.asarray(s["status"], np.int8)}
                           for s in d["snapshots"]]

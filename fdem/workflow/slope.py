@@ -520,10 +520,15 @@ def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     at rest when no node has moved more than 1 % of the failure displacement within 5 ``T``
     (:class:`~fdem.workflow.stages.Convergence` ``drift``): a slope that crept and stopped rings
     on at a kinetic energy that never falls to 1 % of its small peak (the high-angle coarse
-    slope: 0.05-0.3 J/m for 14 s after a peak of 5.5 J/m, 2.6 cm of creep)."""
-    cap = wf.runout_time or max(20.0 * T, 4.0 * math.sqrt(2.0 * height / g))
+    slope: 0.05-0.3 J/m for 14 s after a peak of 5.5 J/m, 2.6 cm of creep). A frame every half
+    free-fall time ``sqrt(2 H / g) / 2`` (1.2 s on a 30 m model): the runout's own time scale,
+    not a quarter of its cap, which gave the four-slope runs (cap 60 s, at rest after 10-20 s)
+    one frame of their collapse."""
+    free_fall = math.sqrt(2.0 * height / g)
+    cap = wf.runout_time or max(20.0 * T, 4.0 * free_fall)
     fail_displacement = wf.fail_displacement or 0.01 * height
     return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
+                 output_interval=min(0.5 * free_fall, cap / 4.0),
                  converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T,
                                       drift=0.01 * fail_displacement, drift_window=5.0 * T),
                  domain_margin=0.01 * height, escape_share=ESCAPE_SHARE)

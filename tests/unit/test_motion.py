@@ -143,6 +143,39 @@ def test_mid_failure_is_the_snapshot_nearest_half_the_final_spread():
     assert d[RUNNER].max() == pytest.approx(mid["d90"], rel=1e-6)
 
 
+def test_mid_failure_is_the_failure_the_run_ended_in_after_the_reduction_carried_on():
+    """A block falls 9 m off the face and comes to rest; the reduction carries on, and the mass
+    beside it then runs 16 m. The mid-failure snapshot and its D90 are the second failure's,
+    measured from the state the reduction carried on from; the locked part still reads the
+    whole run's displacement."""
+    block, mass = C0[:, 0] < 2.0, C0[:, 0] > 4.0  # 8 m^2 and 64 m^2, rock between them
+    rec = MotionRecord(TOPO, threshold=0.1)
+    sim = Rows()
+    rec(sim)
+    for k in range(1, 10):  # the block, 1 m a row, to 9 m
+        sim.move(block, 1.0, 0.1 * k)
+        rec(sim)
+    first = [s["d90"] for s in rec.snapshots]
+    assert max(first) >= 9.0 / np.sqrt(2)  # the ladder of sqrt(2) levels
+    sim.stage = "reduction_F2.000"  # carried on from rest: the record of snapshots starts again
+    rec(sim)
+    assert rec.snapshots == [] and rec.d90(sim.state.x) == 0.0
+    sim.stage = "runout_F2.000"
+    for k in range(1, 17):  # the mass, 1 m a row, to 16 m
+        sim.move(mass, 1.0, 1.0 + 0.1 * k)
+        rec(sim)
+    final = rec.d90(sim.state.x)
+    assert final == pytest.approx(16.0)  # the block has not moved since: not part of it
+    mid = rec.mid_failure(final)
+    assert 8.0 / np.sqrt(2) <= mid["d90"] <= 8.0 * np.sqrt(2) and mid["time"] > 1.0
+    d = np.linalg.norm(mid["x"][TOPO.triangles].mean(axis=1) - C0, axis=1)
+    assert d[block].min() == pytest.approx(9.0) and d[mass].max() == pytest.approx(mid["d90"])
+    assert rec.locked(sim.state.x)["failed_area_m2"] == pytest.approx(72.0)  # the whole run's
+    again = MotionRecord(TOPO, threshold=0.1)  # kept with a checkpoint
+    again.load_state_dict(rec.state_dict())
+    assert again.d90(sim.state.x) == pytest.approx(16.0) and again.last_stage == "runout_F2.000"
+
+
 def test_the_record_survives_its_state_dict():
     rec = MotionRecord(TOPO, threshold=0.1)
     sim = run_rows(rec)

@@ -46,6 +46,11 @@ def test_a_stage_runs_at_its_own_time_step_factor_and_gives_it_back():
     assert r.dt == pytest.approx(0.8 * crit)
     # the workflow's runout stage runs at the workflow's factor
     assert runout_stage(SlopeWorkflow(runout_dt_fraction=0.4), T, 10.0, 9.81).dt_fraction == 0.4
+    # its frames every half free-fall time over the height, whatever the cap (a 60 s cap gave a
+    # collapse at rest after 11 s no frame); a short cap keeps four
+    free_fall = np.sqrt(2.0 * 30.0 / 9.81)
+    assert runout_stage(SlopeWorkflow(runout_time=60.0), T, 30.0, 9.81).output_interval == pytest.approx(0.5 * free_fall)
+    assert runout_stage(SlopeWorkflow(runout_time=0.6), T, 30.0, 9.81).output_interval == pytest.approx(0.15)
     # a user step above the critical one is refused, and the simulation keeps its own factor
     s.sim.user_dt = 2.0 * crit
     with pytest.raises(ValueError, match="exceeds the stable time step"):
