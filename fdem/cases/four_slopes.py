@@ -533,6 +533,8 @@ def main(argv=None) -> dict:
               + (f" at F = {summary['failed_at_factor']:.3f}" if summary["failed_at_factor"] else "")
               + (f"; factor of safety {summary['fos']:.3f} (between {summary['fos_bracket'][0]:.3f} and "
                  f"{summary['fos_bracket'][1]:.3f}, {summary['fos_method']})" if summary.get("fos") else ""))
+        if (result.get("fos") or {}).get("error"):  # the bracket's end contradicted it: which way to move it
+            print(f"factor-of-safety search: {result['fos']['error']}")
         for fall in summary["local_falls"]:
             print(local_fall_line(fall))
         print(f"ran {sim.state.step} steps ({sim.state.time:.4g} s) in {summary['seconds_simulation']:.1f} s; "

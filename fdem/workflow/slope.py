@@ -286,12 +286,19 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
     else:
         if wf.fos is not None:
             lower, upper, tol = wf.fos
+
             # its trials restart from this state and leave the simulation in it; the journal keeps
-            # each finished trial, so a search cut short goes on from its last one on resume
-            summary["fos"] = (journal.once("fos", lambda: factor_of_safety(
-                sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal).as_dict())
-                if journal is not None
-                else factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir).as_dict())
+            # each finished trial, so a search cut short goes on from its last one on resume. A
+            # bracket whose end contradicts it is a result too (the factor lies beyond it), kept
+            # and reported; the schedule after it does not depend on it and goes on.
+            def search():
+                try:
+                    return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir,
+                                            journal=journal).as_dict()
+                except BracketError as err:
+                    return beyond_bracket(err, lower, upper)
+
+            summary["fos"] = journal.once("fos", search) if journal is not None else search()
         if wf.reduction == "none":
             _tell_searched(summary)
             return
@@ -338,10 +345,22 @@ def _tell_searched(summary: dict) -> None:
     outcome ``searched``, the bracket in words; the state is the equilibrium at ``F = 1`` the
     trials started from."""
     fos = summary["fos"]
-    lo, hi = fos["bracket"]
     summary["outcome"] = "searched"
+    if fos["fos"] is None:
+        summary["ending"] = f"{fos['error']} (the search was the analysis, reduction 'none')"
+        return
+    lo, hi = fos["bracket"]
     summary["ending"] = (f"factor of safety {fos['fos']:.4g} (stable at {lo:.4g}, not at {hi:.4g}; "
                          f"{fos['n_trials']} trials): the search was the analysis (reduction 'none')")
+
+
+def beyond_bracket(err: BracketError, lower: float, upper: float) -> dict:
+    """The search's record when an end of its bracket contradicts it: no factor, the bracket open
+    on the side the factor lies beyond (``[upper, None]``: stable at the upper end; ``[None,
+    lower]``: failing at the lower), and the message (``error``), which says which way to move
+    the bracket."""
+    stable_at_upper = err.trial.stable
+    return {"fos": None, "bracket": [upper, None] if stable_at_upper else [None, lower], "error": str(err)}
 
 
 def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> None:
@@ -484,8 +503,7 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) 
             return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, trigger=GravityIncrease(),
                                     out_dir=out_dir, journal=journal).as_dict()
         except BracketError as err:
-            return {"fos": None, "bracket": [upper, None] if "stable" in str(err) else [None, lower],
-                    "error": str(err)}
+            return beyond_bracket(err, lower, upper)
 
     summary["fos"] = journal.once("fos", search) if journal is not None else search()
     summary["trigger"] = "gravity"
@@ -538,8 +556,11 @@ def factor_of_safety_figures(result: dict) -> dict:
     """``fos``, ``fos_bracket`` and ``fos_method`` from a workflow summary: the bisection's when
     it searched, else the bracket of the reduction steps, ``[largest factor at which the slope
     converged, factor at which it failed]``, with ``fos`` its middle (``None`` if it never failed)."""
-    if result.get("fos"):
-        return {"fos": result["fos"]["fos"], "fos_bracket": result["fos"]["bracket"], "fos_method": "bisection"}
+    fos = result.get("fos")
+    stepped = any(st["name"].startswith("reduction_F") for st in result["stages"])
+    # a search whose bracket was contradicted gives way to the steps' bracket, when there are steps
+    if fos and (fos.get("fos") is not None or not stepped):
+        return {"fos": fos["fos"], "fos_bracket": fos["bracket"], "fos_method": "bisection"}
     lo, failing = steps_bracket(result)
     return {"fos": None if lo is None or failing is None else 0.5 * (lo + failing), "fos_bracket": [lo, failing],
             "fos_method": "reduction steps"}

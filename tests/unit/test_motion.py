@@ -301,6 +301,44 @@ def test_the_reduction_steps_carry_on_after_a_creep(monkeypatch, script, outcome
 
 
 
+@pytest.mark.parametrize("reduction", ["none", "steps"])
+@pytest.mark.parametrize("stable_at_upper", [True, False])
+def test_a_bracket_its_ends_contradict_is_a_result_not_a_crash(monkeypatch, reduction, stable_at_upper):
+    """A search whose upper factor still stands (or whose lower one already fails) ends with the
+    side the factor lies beyond and the message, after two trials of perhaps hours: kept in the
+    summary, and the schedule after the search runs as it would have."""
+    import types
+
+    from fdem.workflow import slope
+    from fdem.workflow.fos import BracketError, Trial
+
+    def fake_search(sim, lower, upper, tol, out_dir=None, journal=None):
+        trial = Trial(factor=upper if stable_at_upper else lower, stable=stable_at_upper,
+                      result=stage("trial", "converged" if stable_at_upper else "capped", 1e-3, 0.0))
+        raise BracketError("factor_of_safety: the slope is still stable at the upper factor F = 2; raise the bracket"
+                           if stable_at_upper else "factor_of_safety: the slope already fails at the lower factor "
+                                                   "F = 1.5; lower the bracket", trial)
+
+    monkeypatch.setattr(slope, "factor_of_safety", fake_search)
+
+    def fake_run_stage(sim, st, journal=None):
+        return stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+
+    wf = slope.SlopeWorkflow(factors=(1.25, 1.5), fos=(1.5, 2.0, 0.1), reduction=reduction)
+    summary = scripted_workflow(monkeypatch, fake_run_stage, types.SimpleNamespace(time_capped=False), wf)
+    assert summary["fos"]["fos"] is None
+    assert summary["fos"]["bracket"] == ([2.0, None] if stable_at_upper else [None, 1.5])
+    figures = factor_of_safety_figures(summary)
+    if reduction == "none":
+        assert summary["outcome"] == "searched" and "bracket" in summary["ending"]
+        assert [st["name"] for st in summary["stages"]] == ["equilibrium"]
+        assert figures == {"fos": None, "fos_bracket": summary["fos"]["bracket"], "fos_method": "bisection"}
+    else:  # the steps went on and stood at both factors: their bracket is the figure
+        assert summary["outcome"] == "stable"
+        assert [st["name"] for st in summary["stages"]] == ["equilibrium", "reduction_F1.250", "reduction_F1.500"]
+        assert figures["fos_method"] == "reduction steps" and figures["fos_bracket"] == [1.5, None]
+
+
 @pytest.mark.parametrize("falls, area_limit, outcome, bracket, stood", [
     # a block of 0.5 m^2 falls at 1.5 and comes to rest: the steps carry on, the slope stands at 2.0
     ({"runout": (3, 2.0)}, 1.2, "stable", [2.0, None], [1.5]),
