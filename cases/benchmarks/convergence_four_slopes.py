@@ -84,7 +84,8 @@ def row(summary: dict) -> dict:
     wf = summary.get("workflow") or {}
     fos = wf.get("fos") or {}
     # the bracket of the steps: converged, crept and local-fall factors stand (one rule, the workflow's)
-    steps = steps_bracket(wf) if wf.get("stages") else [None, None]
+    # a search alone (--reduction none, outcome searched) has no steps
+    steps = steps_bracket(wf) if wf.get("stages") and summary.get("outcome") != "searched" else [None, None]
     # the last undamped stage: after a creep or a local fall the reduction carries on, and a later
     # one is runout_F<factor>; its figures are the failure's only when the run failed
     runout_stage = next((st for st in reversed(wf.get("stages", [])) if st["name"].startswith("runout")), None)

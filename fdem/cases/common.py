@@ -445,8 +445,9 @@ def check_mesh_size(parser: argparse.ArgumentParser, geometry, size: float) -> i
 def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> dict:
     """:func:`report_cost` for the slope workflow's runout stage at its cap and its own step
     (the longest stage by far: the quasi-static stages run density-scaled at a larger step); for
-    a run whose analysis is the factor-of-safety search (``reduction = "none"``), the search at
-    its most: ``2 + ceil(log2((upper - lower) / tol))`` trials, each capped at 5 response times."""
+    a run whose analysis is the factor-of-safety search (``reduction = "none"``), the equilibrium
+    at F = 1 (capped at 10 response times) and the search at its most: ``2 + ceil(log2((upper -
+    lower) / tol))`` trials, each capped at 5 response times."""
     import math
 
     import numpy as np
@@ -455,11 +456,14 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     from fdem.workflow.stages import response_time
 
     if workflow.reduction == "none":
+        from fdem.workflow.fos import DEFAULT_MAX_TRIALS
+
         lower, upper, tol = workflow.fos
-        trials = 2 + math.ceil(math.log2((upper - lower) / tol))
-        cap = 5.0 * response_time(sim.model)
-        return report_cost(parser, sim, args, trials * cap,
-                           f"the factor-of-safety search, at most {trials} trials of up to {cap:.3g} s simulated")
+        trials = min(DEFAULT_MAX_TRIALS, 2 + max(0, math.ceil(math.log2((upper - lower) / tol))))
+        T = response_time(sim.model)
+        return report_cost(parser, sim, args, 10.0 * T + trials * 5.0 * T,
+                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {10.0 * T:.3g} s "
+                           f"and {trials} trials of up to {5.0 * T:.3g} s simulated")
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     cap = runout_stage(workflow, response_time(sim.model), height, g).max_time

@@ -29,8 +29,9 @@ centroid has travelled ``move_distance`` from there. At the end of a run this te
   can no longer be the nearest to half the final one), so at most five are kept. The picture is
   of the failure the run ended in: when the reduction carries on after a runout (a creep or a
   block off the face that came to rest, :func:`fdem.workflow.slope._run_stages`), the snapshots
-  start again from the state it carries on from, their ``D90`` measured from there (the locked
-  part keeps the whole run's displacement). The high-angle coarse slope lost a 2.7 m^2 toe block
+  start again from the state it carries on from, their ``D90`` measured from there, once a
+  triangle has moved ``threshold`` since (until then, and in a run that stands to the end, the
+  last failure's are kept; the locked part keeps the whole run's displacement). The high-angle coarse slope lost a 2.7 m^2 toe block
   at F = 1.43 (D90 9.1 m) and collapsed at F = 3.33 (D90 15.3 m): measured from the start, the
   toe block's fall was the snapshot nearest half the collapse's D90.
 
@@ -128,7 +129,8 @@ class MotionRecord:
         self.snapshots: list[dict] = []
         self._next_level = self.threshold
         self.origin = self._c0  # centroids the snapshots' D90 is measured from: the state the present failure began at
-        self.last_stage = ""  # the stage of the last row booked (a trial's rows are not booked)
+        self.pending_origin = None  # the state the reduction carried on from, until something moves from it
+        self.last_stage: str | None = ""  # the stage of the last row booked (trial rows are not); None: unknown
 
     def _centroids(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(x)[self._tri].mean(axis=1)
@@ -154,11 +156,17 @@ class MotionRecord:
         stage = str(getattr(sim, "stage", ""))
         if stage.startswith("trial"):
             return d90  # a trial restarts from a restored state: its motion is not the run's
+        if self.last_stage is None:  # loaded from a checkpoint that did not keep it: the row before this one's
+            history = getattr(sim, "history", None)
+            self.last_stage = str(history[-1].get("stage", "")) if history else ""
         if stage.startswith("reduction") and self.last_stage.startswith("runout"):
             # the reduction carries on after a runout that came to rest: a new failure, if any,
-            # is measured and pictured from here
-            self.origin, self.snapshots, self._next_level = c.copy(), [], self.threshold
+            # is measured and pictured from here, once it has moved
+            self.pending_origin = c.copy()
         self.last_stage = stage
+        if self.pending_origin is not None and self._d90_from(c, self.pending_origin) > 0.0:
+            self.origin, self.pending_origin = self.pending_origin, None
+            self.snapshots, self._next_level = [], self.threshold
         if self.anchor is None:
             self.anchor = c.copy()
             self.since_step = int(sim.state.step)
@@ -234,7 +242,8 @@ class MotionRecord:
         return {"anchor": None if self.anchor is None else self.anchor.copy(), "moved_time": self.moved_time.copy(),
                 "moved_d90": self.moved_d90.copy(), "since_step": self.since_step,
                 "next_level": float(self._next_level), "snapshots": [dict(s) for s in self.snapshots],
-                "origin": None if self.origin is self._c0 else self.origin.copy(), "last_stage": self.last_stage}
+                "origin": None if self.origin is self._c0 else self.origin.copy(), "last_stage": self.last_stage,
+                "pending_origin": None if self.pending_origin is None else self.pending_origin.copy()}
 
     def load_state_dict(self, d: dict) -> None:
         n = len(self._tri)
@@ -248,7 +257,9 @@ class MotionRecord:
         # a record saved before the origin was kept measured every failure from the start
         origin = d.get("origin")
         self.origin = self._c0 if origin is None else np.array(origin, dtype=np.float64)
-        self.last_stage = str(d.get("last_stage", ""))
+        self.last_stage = d.get("last_stage")  # None: asked of the history at the next row
+        pending = d.get("pending_origin")
+        self.pending_origin = None if pending is None else np.array(pending, dtype=np.float64)
         self.snapshots = [{"time": float(s["time"]), "step": int(s["step"]), "d90": float(s["d90"]),
                            "x": np.asarray(s["x"], np.float32), "status": np.asarray(s["status"], np.int8)}
                           for s in d["snapshots"]]

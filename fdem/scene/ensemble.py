@@ -206,6 +206,10 @@ def scene_ensemble(path: str | Path, n: int | None = None, seed: int | None = No
         from fdem.scene.objects import workflow
 
         runout = workflow(scene)
+        if runout.reduction == "none":
+            raise SceneError(f"{path}: [ensemble] runout = true runs each realization's workflow after its search, "
+                             f"and [workflow] reduction = \"none\" has none: set reduction to steps or rate, or "
+                             f"runout = false")
     try:
         return Ensemble(realization, dists, n=settings["n"] if n is None else n,
                         seed=settings["seed"] if seed is None else seed,

@@ -299,6 +299,11 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                     return beyond_bracket(err, lower, upper)
 
             summary["fos"] = journal.once("fos", search) if journal is not None else search()
+            fos = summary["fos"]
+            if fos.get("time_capped") or any(t.get("time_capped") for t in fos.get("trials", [])):
+                # the run's --max-time stopped a trial before its rule decided: no verdict
+                summary["outcome"] = "time_capped"
+                return
         if wf.reduction == "none":
             _tell_searched(summary)
             return
@@ -336,7 +341,12 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
                                             damping=NO_DAMPING), journal=journal))
             summary["failed_at_factor"] = F_end
         summary["outcome"] = "failed" if summary["failed_at_factor"] is not None else "stable"
-    if summary["outcome"] == "failed":
+    if summary["outcome"] == "failed" and wf.reduction == "none":
+        # the slope does not stand at F = 1, so there is no factor to search: the search was the
+        # whole analysis, and no runout is wanted of it
+        summary["ending"] = (f"the slope does not stand at F = 1 ({eq.reason}: {eq.detail}): its factor of "
+                             f"safety is below 1, and with reduction 'none' no runout follows")
+    elif summary["outcome"] == "failed":
         _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
 
 
@@ -360,7 +370,8 @@ def beyond_bracket(err: BracketError, lower: float, upper: float) -> dict:
     lower]``: failing at the lower), and the message (``error``), which says which way to move
     the bracket."""
     stable_at_upper = err.trial.stable
-    return {"fos": None, "bracket": [upper, None] if stable_at_upper else [None, lower], "error": str(err)}
+    return {"fos": None, "bracket": [upper, None] if stable_at_upper else [None, lower], "error": str(err),
+            "time_capped": bool(err.trial.time_capped)}
 
 
 def _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal) -> None:

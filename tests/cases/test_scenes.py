@@ -493,6 +493,11 @@ def test_an_ensemble_varies_the_scene_keys_it_names(tmp_path):
         text = SMALL_SLOPE + ENSEMBLE.replace(bad[1], bad[0], 1)
         with pytest.raises(SceneError, match=re.escape(words)):
             scene_ensemble(_write(tmp_path, text, "bad.toml"))
+    # a workflow after each search, whose workflow is the search alone, is refused before any trial
+    alone = (SMALL_SLOPE + '[workflow]\nreduction = "none"\nfos = [0.5, 3.0, 0.2]\n'
+             + ENSEMBLE.replace("[ensemble]\n", "[ensemble]\nrunout = true\n", 1))
+    with pytest.raises(SceneError, match='reduction = "none" has none'):
+        scene_ensemble(_write(tmp_path, alone, "alone.toml"))
     low = realize(ens, 0, {"cracks_1_phi": 20.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
     high = realize(ens, 1, {"cracks_1_phi": 40.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
     assert low["status"] == high["status"] == "ok", (low["error"], high["error"])

@@ -146,8 +146,9 @@ def test_mid_failure_is_the_snapshot_nearest_half_the_final_spread():
 def test_mid_failure_is_the_failure_the_run_ended_in_after_the_reduction_carried_on():
     """A block falls 9 m off the face and comes to rest; the reduction carries on, and the mass
     beside it then runs 16 m. The mid-failure snapshot and its D90 are the second failure's,
-    measured from the state the reduction carried on from; the locked part still reads the
-    whole run's displacement."""
+    measured from the state the reduction carried on from; until the mass moves they are the
+    block's (a slope that stands after a local fall keeps its picture); the locked part still
+    reads the whole run's displacement."""
     block, mass = C0[:, 0] < 2.0, C0[:, 0] > 4.0  # 8 m^2 and 64 m^2, rock between them
     rec = MotionRecord(TOPO, threshold=0.1)
     sim = Rows()
@@ -157,9 +158,16 @@ def test_mid_failure_is_the_failure_the_run_ended_in_after_the_reduction_carried
         rec(sim)
     first = [s["d90"] for s in rec.snapshots]
     assert max(first) >= 9.0 / np.sqrt(2)  # the ladder of sqrt(2) levels
-    sim.stage = "reduction_F2.000"  # carried on from rest: the record of snapshots starts again
-    rec(sim)
-    assert rec.snapshots == [] and rec.d90(sim.state.x) == 0.0
+    # saved at the runout's end by a version that did not keep the last stage: read from the history
+    state = rec.state_dict()
+    del state["last_stage"]
+    old = MotionRecord(TOPO, threshold=0.1)
+    old.load_state_dict(state)
+    sim.stage, sim.history = "reduction_F2.000", [{"stage": "runout"}]
+    for record in (rec, old):  # carried on from rest: until something moves, the block's fall stays the picture
+        record(sim)
+        assert record.pending_origin is not None and record.d90(sim.state.x) == pytest.approx(9.0)
+        assert record.mid_failure(record.d90(sim.state.x))["time"] < 1.0  # a snapshot of the fall
     sim.stage = "runout_F2.000"
     for k in range(1, 17):  # the mass, 1 m a row, to 16 m
         sim.move(mass, 1.0, 1.0 + 0.1 * k)
@@ -171,6 +179,7 @@ def test_mid_failure_is_the_failure_the_run_ended_in_after_the_reduction_carried
     d = np.linalg.norm(mid["x"][TOPO.triangles].mean(axis=1) - C0, axis=1)
     assert d[block].min() == pytest.approx(9.0) and d[mass].max() == pytest.approx(mid["d90"])
     assert rec.locked(sim.state.x)["failed_area_m2"] == pytest.approx(72.0)  # the whole run's
+    assert rec.pending_origin is None  # the mass moved: the snapshots are the second failure's
     again = MotionRecord(TOPO, threshold=0.1)  # kept with a checkpoint
     again.load_state_dict(rec.state_dict())
     assert again.d90(sim.state.x) == pytest.approx(16.0) and again.last_stage == "runout_F2.000"
@@ -337,6 +346,38 @@ def test_a_bracket_its_ends_contradict_is_a_result_not_a_crash(monkeypatch, redu
         assert summary["outcome"] == "stable"
         assert [st["name"] for st in summary["stages"]] == ["equilibrium", "reduction_F1.250", "reduction_F1.500"]
         assert figures["fos_method"] == "reduction steps" and figures["fos_bracket"] == [1.5, None]
+
+
+def test_a_search_alone_runs_no_runout_and_a_capped_trial_gives_no_verdict(monkeypatch):
+    """With reduction 'none' a slope that does not stand at F = 1 has its answer (a factor below
+    1) and gets no runout; a search whose trial the run's --max-time stopped ends time_capped,
+    not with a bracket or an error it did not find."""
+    import types
+
+    from fdem.workflow import slope
+    from fdem.workflow.fos import BracketError, Trial
+
+    wf = slope.SlopeWorkflow(fos=(1.0, 2.0, 0.1), reduction="none")
+    summary = scripted_workflow(monkeypatch, lambda sim, st, journal=None: stage(st.name, "failed", 0.5, 1.0),
+                                types.SimpleNamespace(time_capped=False), wf)
+    assert [st["name"] for st in summary["stages"]] == ["equilibrium"]
+    assert summary["outcome"] == "failed" and summary["failed_at_factor"] == 1.0
+    assert "no runout" in summary["ending"]
+
+    def converged(sim, st, journal=None):
+        return stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+
+    capped = Trial(factor=1.0, stable=False, result=stage("trial", "capped", 1e-3, 0.0), time_capped=True)
+
+    def cut_by_the_cap(sim, lower, upper, tol, out_dir=None, journal=None):
+        raise BracketError("factor_of_safety: the slope already fails at the lower factor F = 1", capped)
+
+    for reduction in ("none", "steps"):
+        monkeypatch.setattr(slope, "factor_of_safety", cut_by_the_cap)
+        summary = scripted_workflow(monkeypatch, converged, types.SimpleNamespace(time_capped=True),
+                                    slope.SlopeWorkflow(factors=(1.25,), fos=(1.0, 2.0, 0.1), reduction=reduction))
+        assert summary["outcome"] == "time_capped" and summary["fos"]["time_capped"]
+        assert [st["name"] for st in summary["stages"]] == ["equilibrium"]
 
 
 @pytest.mark.parametrize("falls, area_limit, outcome, bracket, stood", [
