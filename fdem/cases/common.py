@@ -418,6 +418,13 @@ def _source() -> dict:
     return out
 
 
+ROOM_FILE = ".fdem_room"
+ROOM_BYTES = 64 * 1024
+"""A run keeps this much room in its folder from its start (``ROOM_FILE``) and gives it back
+when the disk fills, so that the ``summary.json`` and ``run.json`` of a run stopped by a full
+disk (at most about 20 KB) are still written; the file goes when the run ends."""
+
+
 def _write_run_file(parser, folder: Path, record: dict) -> None:
     from fdem.io.jsonable import write_json
 
@@ -425,6 +432,18 @@ def _write_run_file(parser, folder: Path, record: dict) -> None:
         write_json(folder / RUN_FILE, record)
     except OSError as err:
         parser.error(f"cannot write {folder / RUN_FILE}: {err.strerror or err}")
+    try:
+        (folder / ROOM_FILE).write_bytes(bytes(ROOM_BYTES))
+    except OSError:
+        _give_room_back(folder)  # a disk that cannot take it now fails the run's first write anyway
+
+
+def _give_room_back(folder) -> None:
+    """Delete the room a run kept in ``folder`` (:data:`ROOM_FILE`), for its last words."""
+    try:
+        (Path(folder) / ROOM_FILE).unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def check_mesh_size(parser: argparse.ArgumentParser, geometry, size: float) -> int:
@@ -584,6 +603,7 @@ def write_report(report, out, extra: dict, pictures_on: bool) -> dict:
         what = f"{err.strerror} ({err.filename})" if err.strerror and err.filename else str(err)
         summary = {**extra, "outcome": "write_error", "ending": f"could not write the outputs: {what}"}
         print(f"could not write the outputs: {what}", file=sys.stderr)
+        _give_room_back(out)
         try:
             write_json(Path(out) / "summary.json", summary)
         except OSError:
@@ -596,6 +616,7 @@ def finish_run(out, summary: dict) -> None:
     ending that is not a finish, print why and how to resume."""
     from fdem.io.jsonable import write_json
 
+    _give_room_back(out)
     if summary.get("outcome") in ("interrupted", "unstable", "write_error"):
         record = _read_run_file(Path(out))
         print(f"{summary['outcome']}: {summary.get('ending')}\nresume with: fdem run {record.get('case', 'NAME')} "

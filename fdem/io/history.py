@@ -39,7 +39,13 @@ class HistoryWriter:
 
     def close(self) -> None:
         if self._fh is not None:
-            self._fh.close()
+            try:
+                self._fh.close()
+            except OSError:
+                # every row is flushed as it is written, so what is left is a row whose write
+                # already failed (a full disk) and ended the run as a write error: closing must not
+                # raise again and lose the summary the run can still write
+                pass
             self._fh = None
 
 

@@ -159,8 +159,12 @@ class RunJournal:
             return None
         from fdem.solve.checkpoint import save_checkpoint
 
+        # between stages, a stage in progress that a resume has not reached yet is still in
+        # progress: the state is the checkpoint's (replayed stages do not step), and a stop now
+        # (a signal right after a resume or a carry-on began) must keep it, or the resume after
+        # it would start that stage afresh
         context = {"journal": 1, "done": self.done, "marks": self.marks,
-                   "stage": None if self.current is None else self.current(), "why": why}
+                   "stage": self.current() if self.current is not None else self.resume, "why": why}
         t0 = time.perf_counter()
         save_checkpoint(sim, self.path, context=context)
         # the interval runs from the end of the write: a write slower than the interval (a large

@@ -304,7 +304,8 @@ def test_checkpoint_of_another_model_names_what_differs(tmp_path):
 
 def test_a_full_disk_ends_with_a_message_a_summary_and_exit_1(tmp_path):
     """On a 2 MB tmpfs the frames fill the disk mid-run: one line on stderr (no traceback), exit
-    1, and the summary and run.json say ``write_error`` with the reason."""
+    1, and the summary and run.json say ``write_error`` with the reason (written in the room the
+    run kept from its start, however full the frames left the disk)."""
     small = tmp_path / "small"
     small.mkdir()
     if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(small)],
@@ -318,6 +319,7 @@ def test_a_full_disk_ends_with_a_message_a_summary_and_exit_1(tmp_path):
         record = json.loads((small / "run" / "run.json").read_text())
         assert summary["outcome"] == record["outcome"] == "write_error"
         assert "No space left" in record["ending"] and record["exit_code"] == 1
+        assert not (small / "run" / ".fdem_room").exists()  # the room kept for these last words is given back
     finally:
         subprocess.run(["umount", str(small)], capture_output=True)
 

@@ -437,6 +437,33 @@ def test_a_checkpoint_inside_a_trial_is_refused_by_a_search_that_cannot_go_on_wi
     sim.close()
 
 
+def test_a_stop_before_a_resumed_stage_is_reached_keeps_that_stage_in_progress(tmp_path):
+    """A signal that lands after a resume (or a carry-on) began but before the stage in progress
+    is reached stops the run between stages; the state is still the checkpoint's, so the
+    checkpoint written then names that stage in progress, and the next resume continues it
+    instead of starting it afresh. Once the stage has been taken up, a stop between stages
+    names none."""
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.checkpoint import read_checkpoint
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+    from fdem.workflow.journal import RunJournal
+
+    model = Model(build_topology(structured_rectangle(2, 2, 1.0, 1.0)),
+                  ElasticMaterial(young=1e8, poisson=0.25, density=2500.0))
+    sim = Simulation(model, progress=False)
+    journal = RunJournal(tmp_path / "checkpoint.npz")
+    journal.done = [{"name": "equilibrium", "reason": "converged"}]
+    journal.resume = {"name": "runout", "t0": 0.0, "step0": 0, "n_total": None}
+    journal.write(sim, "interrupted")
+    assert read_checkpoint(tmp_path / "checkpoint.npz")["context"]["stage"]["name"] == "runout"
+    assert journal.next_stage("equilibrium")[0] == "done" and journal.next_stage("runout")[0] == "resume"
+    journal.write(sim, "interrupted")
+    assert read_checkpoint(tmp_path / "checkpoint.npz")["context"]["stage"] is None
+
+
 def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
     """Undamped, a slope in equilibrium rings elastically for ever at a kinetic energy that no
     small share of its own small peak bounds: the kinetic-energy rule alone runs such a stage to
