@@ -465,20 +465,17 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     """:func:`report_cost` for the slope workflow's runout stage at its cap and its own step
     (the longest stage by far: the quasi-static stages run density-scaled at a larger step); for
     a run whose analysis is the factor-of-safety search (``reduction = "none"``), the equilibrium
-    at F = 1 (capped at 10 response times) and the search at its most: ``2 + ceil(log2((upper -
-    lower) / tol))`` trials, each capped at 5 response times."""
-    import math
-
+    at F = 1 (capped at 10 response times) and the search at its most
+    (:func:`fdem.workflow.fos.most_trials` trials, each capped at 5 response times)."""
     import numpy as np
 
     from fdem.workflow.slope import runout_stage
     from fdem.workflow.stages import response_time
 
     if workflow.reduction == "none":
-        from fdem.workflow.fos import DEFAULT_MAX_TRIALS
+        from fdem.workflow.fos import most_trials
 
-        lower, upper, tol = workflow.fos
-        trials = min(DEFAULT_MAX_TRIALS, 2 + max(0, math.ceil(math.log2((upper - lower) / tol))))
+        trials = most_trials(*workflow.fos)
         T = response_time(sim.model)
         return report_cost(parser, sim, args, 10.0 * T + trials * 5.0 * T,
                            f"the equilibrium at F = 1 and the factor-of-safety search, at most {10.0 * T:.3g} s "

@@ -25,7 +25,7 @@ from fdem.solve.damping import Damping
 from fdem.solve.simulation import Simulation
 from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, response_time, run_stage
 
-__all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "fundamental_damping",
+__all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
            "TRIALS_MARK", "START_NAME"]
 
@@ -55,6 +55,17 @@ resumed search needs for its later trials is kept apart."""
 
 def _real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def most_trials(lower: float, upper: float, tol: float, max_trials: int = DEFAULT_MAX_TRIALS) -> int:
+    """The trials a serial search of ``[lower, upper]`` to ``tol`` takes at most: the two ends
+    and ``floor(log2((upper - lower) / tol)) + 1`` halvings, capped at ``max_trials``. One more
+    halving than ``ceil`` when the width is ``tol`` times a power of two: the midpoints are
+    rounded, and a bracket of exactly ``tol`` can come out a few ulps wider (``[1.0, 1.8]`` to 0.1
+    takes 6 trials, not 5)."""
+    width = upper - lower
+    halvings = 0 if width <= tol else 1 + math.floor(math.log2(width / tol))
+    return min(int(max_trials), 2 + halvings)
 
 
 def check_bracket(lower: float, upper: float, tol: float, max_trials: int = DEFAULT_MAX_TRIALS) -> None:

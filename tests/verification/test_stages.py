@@ -217,6 +217,11 @@ def test_a_search_alone_ends_after_its_bracket_with_the_limit_equilibrium_factor
     lo, hi = summary["fos"]["bracket"]
     assert hi - lo <= 0.1 and summary["fos"]["fos"] == pytest.approx(le.fos, rel=0.10), (summary["fos"], le.fos)
     assert f"{summary['fos']['fos']:.4g}" in summary["ending"]
+    # the cost estimate's count of trials bounds the search's, rounding of the midpoints included
+    from fdem.workflow.fos import most_trials
+
+    assert summary["fos"]["n_trials"] <= most_trials(1.0, 1.8, 0.1) == 6
+    assert [most_trials(1.0, 1.3, 0.04), most_trials(1.0, 3.0, 0.04), most_trials(1.0, 1.5, 1.0)] == [5, 8, 2]
     # the trials restore their start state and keep no history rows: every row is the equilibrium's
     assert {row["stage"] for row in sim.history} == {"equilibrium"}
     equilibrium = summary["stages"][0]
