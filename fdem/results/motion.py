@@ -31,9 +31,10 @@ centroid has travelled ``move_distance`` from there. At the end of a run this te
   block off the face that came to rest, :func:`fdem.workflow.slope._run_stages`), the snapshots
   start again from the state it carries on from, their ``D90`` measured from there, once a
   triangle has moved ``threshold`` since (until then, and in a run that stands to the end, the
-  last failure's are kept; the locked part keeps the whole run's displacement). The high-angle coarse slope lost a 2.7 m^2 toe block
-  at F = 1.43 (D90 9.1 m) and collapsed at F = 3.33 (D90 15.3 m): measured from the start, the
-  toe block's fall was the snapshot nearest half the collapse's D90.
+  last failure's are kept; the locked part keeps the whole run's displacement). The high-angle
+  coarse slope lost a 2.7 m^2 toe block at F = 1.43 (D90 9.1 m) and collapsed at F = 3.33 (D90
+  15.3 m): measured from the start, the toe block's fall was the snapshot nearest half the
+  collapse's D90.
 
 ``move_distance`` (default a quarter of ``threshold``, 2.5 cm) is a distance, not a speed: an
 elastic ringing of millimetres never counts as motion, a block sliding at any speed re-anchors

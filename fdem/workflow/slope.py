@@ -344,8 +344,9 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
     if summary["outcome"] == "failed" and wf.reduction == "none":
         # the slope does not stand at F = 1, so there is no factor to search: the search was the
         # whole analysis, and no runout is wanted of it
-        summary["ending"] = (f"the slope does not stand at F = 1 ({eq.reason}: {eq.detail}): its factor of "
-                             f"safety is below 1, and with reduction 'none' no runout follows")
+        summary["ending"] = (f"the slope did not settle at F = 1 ({eq.reason}: {eq.detail}), so there is no "
+                             f"factor of safety above 1 to search; with reduction 'none' no runout follows (run "
+                             f"the steps to see whether it creeps or collapses)")
     elif summary["outcome"] == "failed":
         _runout(sim, wf, summary, record, T, height, g, fail, out_dir, journal)
 

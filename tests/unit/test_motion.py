@@ -349,8 +349,8 @@ def test_a_bracket_its_ends_contradict_is_a_result_not_a_crash(monkeypatch, redu
 
 
 def test_a_search_alone_runs_no_runout_and_a_capped_trial_gives_no_verdict(monkeypatch):
-    """With reduction 'none' a slope that does not stand at F = 1 has its answer (a factor below
-    1) and gets no runout; a search whose trial the run's --max-time stopped ends time_capped,
+    """With reduction 'none' a slope that does not settle at F = 1 has no factor above 1 to search
+    and gets no runout; a search whose trial the run's --max-time stopped ends time_capped,
     not with a bracket or an error it did not find."""
     import types
 
