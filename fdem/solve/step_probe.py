@@ -1,0 +1,159 @@
+"""The critical time step measured on the model itself, against the bound the solver steps with.
+
+The solver's step (:meth:`fdem.solve.simulation.Simulation.critical_dt`) combines each force
+provider's own bound, ``1 / dt^2 = sum_p 1 / dt_p^2``: the exact per-element limit of the
+triangles, a Gershgorin bound on the crack springs and a face-to-face bound on the contact
+penalty. Every one of them is an upper bound on a frequency, so the step is safe; how much
+smaller it is than the model's true limit is what this module measures.
+
+The central-difference step is stable while ``dt <= 2 / omega_max``, ``omega_max^2`` the largest
+eigenvalue of ``M^-1 K`` (Belytschko et al. 2014, sec. 6.3). ``K`` is the tangent stiffness of
+the current state, reached through the step itself: with ``v = 0`` one explicit step gives
+``v_{n+1/2} = dt M^-1 f(x)``, so for a small displacement ``u`` of the free nodes
+
+    M^-1 K u = -(a(x + eps u) - a(x)) / eps,      a(x) = v_{n+1/2} / dt,
+
+every provider's law evaluated exactly as the run evaluates it (one source for each law).
+The largest eigenvalue of its symmetric form ``M^-1/2 K M^-1/2`` on the free degrees of freedom
+is found by implicitly restarted Lanczos (ARPACK through :func:`scipy.sparse.linalg.eigsh`: a
+few dozen products where power iteration needs thousands, the top of a mesh's spectrum being
+crowded). The state is restored after every product (:meth:`Simulation.state_dict`), so a probe
+changes nothing in the run.
+
+What the probe does not see: forces that act on velocities (the contact's tangential springs
+and damping, viscous damping), and the stiffness of contacts that have not formed yet. The
+tangential springs were measured, by perturbing ``v`` as well with damping off, to lower the
+critical step of a settled debris pile by 0.9 % (``docs/benchmarks.md``, "How far the step is
+below the critical one"); contacts yet to form are why the solver keeps its bounds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+
+from fdem.solve.model import FIX_X, FIX_Y
+
+__all__ = ["StepProbe", "measured_critical_dt"]
+
+
+@dataclass(frozen=True)
+class StepProbe:
+    """What :func:`measured_critical_dt` found.
+
+    ``critical_dt`` [s] ``2 / omega_max`` of the model at the probed state; ``omega_max``
+    [rad/s]; ``bound_dt`` [s] the solver's combined critical step and ``limits`` its parts by
+    provider [s]; ``step_dt`` [s] the step the run takes (``dt_fraction`` of the bound);
+    ``steps`` the model steps the eigensolver took; ``converged`` whether it met its
+    tolerance (else the best estimate it had, a lower bound on ``omega_max``); ``mode_nodes``
+    the five nodes where the highest mode is largest (where the limit lives)."""
+    critical_dt: float
+    omega_max: float
+    bound_dt: float
+    limits: dict = field(default_factory=dict)
+    step_dt: float = float("nan")
+    steps: int = 0
+    converged: bool = False
+    mode_nodes: tuple = ()
+
+    @property
+    def margin(self) -> float:
+        """How many times the solver's bound the measured critical step is (>= 1: the bound is safe)."""
+        return self.critical_dt / self.bound_dt
+
+    @property
+    def step_share(self) -> float:
+        """The run's step as a fraction of the measured critical step."""
+        return self.step_dt / self.critical_dt
+
+    def as_dict(self) -> dict:
+        return {"critical_dt_s": self.critical_dt, "omega_max_rad_s": self.omega_max, "bound_dt_s": self.bound_dt,
+                "limits_s": {k: float(v) for k, v in self.limits.items()}, "step_dt_s": self.step_dt,
+                "margin": self.margin, "step_share": self.step_share, "steps": self.steps,
+                "converged": self.converged, "mode_nodes": [int(n) for n in self.mode_nodes]}
+
+
+def _free_dofs(sim) -> np.ndarray:
+    """(n_nodes, 2) mask of the degrees of freedom the step moves freely; a supported one has
+    its velocity prescribed (:data:`fdem.solve.model.FIX_X`, ``FIX_Y``), so it is held at zero
+    in the probe (the eigenproblem of the free part, ``P M^-1 K P``)."""
+    return np.column_stack([(sim.flags & FIX_X) == 0, (sim.flags & FIX_Y) == 0])
+
+
+def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps: float | None = None,
+                         seed: int = 0) -> StepProbe:
+    """Measure the critical central-difference step of ``sim`` at its current state [s].
+
+    ``max_iterations`` Lanczos restarts at most, ``rtol`` the relative accuracy asked of
+    ``omega_max^2``; ``eps`` [m] the finite-difference displacement of the node that moves most
+    (default ``1e-13`` of the model's extent, about ``1e-11`` m on a 100 m slope: the stiffness
+    is that of infinitesimal motion, as stability asks, only well below the overlaps of the
+    contacts in a pile, which are micrometres; a displacement of a micrometre there measured a
+    step 2.5 times too long, 1e-10 to 1e-13 m agree to 0.1 %, the round-off of the coordinates);
+    ``seed`` the random
+    start vector's. Each product costs one step of the model plus a restore of its state.
+    Returns a :class:`StepProbe`; the simulation's state, crack damage, contact history and
+    ledger are as they were."""
+    if max_iterations < 1:
+        raise ValueError(f"max_iterations must be at least 1, got {max_iterations}")
+    if not 0.0 < rtol < 1.0:
+        raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
+    if sim.providers and any(getattr(p, "device", None) is not None for p in sim.providers):
+        raise ValueError("the step probe runs on the host: probe the model before handing it to the device")
+    bound, limits = sim.critical_dt()
+    saved = sim.state_dict()
+    x0 = saved["x"]
+    if eps is None:
+        extent = float(np.ptp(x0, axis=0).max())
+        eps = 1e-13 * max(extent, 1.0)
+    if not eps > 0.0:
+        raise ValueError(f"eps must be positive, got {eps}")
+    mass = (sim.inertia if sim.inertia is not None else sim.state.mass)[:, None] * np.ones((1, 2))
+    free = _free_dofs(sim)
+    sqrt_m = np.sqrt(mass[free])
+    matvecs = [0]
+
+    def acceleration(u):
+        sim.load_state_dict(saved)
+        if u is not None:
+            sim.state.x[:] += u
+        sim.state.v[:] = 0.0
+        sim.step()
+        return sim.state.v / sim.dt
+
+    def symmetric_product(y):
+        """``M^-1/2 K M^-1/2 y`` on the free degrees of freedom (symmetric where ``K`` is)."""
+        u = np.zeros_like(x0)
+        u[free] = np.ravel(y) / sqrt_m
+        scale = eps / np.abs(u).max()  # the node that moves most moves eps
+        matvecs[0] += 1
+        w = -(acceleration(scale * u) - a0) / scale
+        return sqrt_m * w[free]
+
+    n = int(free.sum())
+    try:
+        a0 = acceleration(None).copy()
+        v0 = np.random.default_rng(seed).standard_normal(n)
+        op = LinearOperator((n, n), matvec=symmetric_product, dtype=np.float64)
+        converged = True
+        try:
+            lam_all, vec = eigsh(op, k=1, which="LA", tol=rtol, maxiter=max_iterations, v0=v0)
+        except ArpackNoConvergence as e:
+            converged = e.eigenvalues.size > 0
+            if not converged:
+                raise ValueError(f"the step probe did not converge in {max_iterations} iterations "
+                                 f"({matvecs[0]} steps): raise max_iterations") from e
+            lam_all, vec = e.eigenvalues, e.eigenvectors
+            converged = False
+        lam = float(lam_all[0])
+    finally:
+        sim.load_state_dict(saved)
+    if not lam > 0.0:
+        raise ValueError(f"the probed model has no positive stiffness (omega_max^2 = {lam!r}): nothing holds it")
+    mode = np.zeros_like(x0)
+    mode[free] = vec[:, 0] / sqrt_m
+    omega = float(np.sqrt(lam))
+    nodes = tuple(int(k) for k in np.argsort(-np.abs(mode).sum(axis=1))[:5])
+    return StepProbe(critical_dt=2.0 / omega, omega_max=omega, bound_dt=float(bound), limits=dict(limits),
+                     step_dt=float(sim.dt), steps=matvecs[0], converged=converged, mode_nodes=nodes)
