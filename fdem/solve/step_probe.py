@@ -20,11 +20,13 @@ few dozen products where power iteration needs thousands, the top of a mesh's sp
 crowded). The state is restored after every product (:meth:`Simulation.state_dict`), so a probe
 changes nothing in the run.
 
-What the probe does not see: forces that act on velocities (the contact's tangential springs
-and damping, viscous damping), and the stiffness of contacts that have not formed yet. The
-tangential springs were measured, by perturbing ``v`` as well with damping off, to lower the
-critical step of a settled debris pile by 0.9 % (``docs/benchmarks.md``, "How far the step is
-below the critical one"); contacts yet to form are why the solver keeps its bounds.
+What the probe does not see: forces that load on velocities, above all the contact's tangential
+springs (they load on slip increments ``v dt``), and the stiffness of contacts that have not
+formed yet. The springs can be loaded by giving the step ``v = u / dt`` as well, but the response
+is then one-sided wherever a contact slides at its friction cap, not a matrix; measured so
+(``cases/benchmarks/stable_step_margin.py``, power iteration), they lowered the critical step of
+the four-slope runouts by 0 to 3 % (``docs/benchmarks.md``, "How far the step is below the
+critical one"). Both are why the solver keeps its bounds.
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from fdem.solve.model import FIX_X, FIX_Y
 
-__all__ = ["StepProbe", "measured_critical_dt"]
+__all__ = ["StepProbe", "measured_critical_dt", "element_size"]
 
 
 @dataclass(frozen=True)
@@ -81,19 +83,29 @@ def _free_dofs(sim) -> np.ndarray:
     return np.column_stack([(sim.flags & FIX_X) == 0, (sim.flags & FIX_Y) == 0])
 
 
+def element_size(x: np.ndarray, triangles: np.ndarray) -> float:
+    """The mean element size [m], ``sqrt(2 A)`` of the mean triangle area ``A``."""
+    a = x[triangles[:, 1]] - x[triangles[:, 0]]
+    b = x[triangles[:, 2]] - x[triangles[:, 0]]
+    return float(np.sqrt(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).mean()))
+
+
 def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps: float | None = None,
                          seed: int = 0) -> StepProbe:
     """Measure the critical central-difference step of ``sim`` at its current state [s].
 
     ``max_iterations`` Lanczos restarts at most, ``rtol`` the relative accuracy asked of
     ``omega_max^2``; ``eps`` [m] the finite-difference displacement of the node that moves most
-    (default ``1e-13`` of the model's extent, about ``1e-11`` m on a 100 m slope: the stiffness
-    is that of infinitesimal motion, as stability asks, only well below the overlaps of the
-    contacts in a pile, which are micrometres; a displacement of a micrometre there measured a
-    step 2.5 times too long, 1e-10 to 1e-13 m agree to 0.1 %, the round-off of the coordinates);
-    ``seed`` the random
-    start vector's. Each product costs one step of the model plus a restore of its state.
-    Returns a :class:`StepProbe`; the simulation's state, crack damage, contact history and
+    (default ``1e-10`` of the mean element size :func:`element_size`); ``seed`` the random start
+    vector's. Stability asks for the stiffness of infinitesimal motion, and the contact law has
+    two scales that bracket ``eps``: a pair counts as touching, not overlapping, until it reaches
+    past the other's edges by ``1e-12`` of an altitude
+    (:data:`fdem.kernels.contact_pairs.TOUCH_EPS`), a step in force that a smaller ``eps`` reads
+    as a huge stiffness; and the overlaps of a pile are micrometres, which a larger ``eps`` opens
+    or closes (on a debris pile of 1 m elements 10 um measured a step 2.5 times too long, 0.1 um
+    5 % too long, 1e-10 and 1e-11 m agree to 2e-5). Regions asleep (:mod:`fdem.solve.sleeping`)
+    are woken for the probe. Each product costs one step of the model plus a restore of its
+    state. Returns a :class:`StepProbe`; the simulation's state, crack damage, contact history and
     ledger are as they were."""
     if max_iterations < 1:
         raise ValueError(f"max_iterations must be at least 1, got {max_iterations}")
@@ -105,8 +117,7 @@ def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps
     saved = sim.state_dict()
     x0 = saved["x"]
     if eps is None:
-        extent = float(np.ptp(x0, axis=0).max())
-        eps = 1e-13 * max(extent, 1.0)
+        eps = 1e-10 * element_size(x0, sim.triangles)
     if not eps > 0.0:
         raise ValueError(f"eps must be positive, got {eps}")
     mass = (sim.inertia if sim.inertia is not None else sim.state.mass)[:, None] * np.ones((1, 2))
@@ -115,7 +126,9 @@ def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps
     matvecs = [0]
 
     def acceleration(u):
+        """``M^-1 f`` at rest after displacing by ``u``."""
         sim.load_state_dict(saved)
+        sim.wake()  # a sleeping region's frozen forces would read as no stiffness
         if u is not None:
             sim.state.x[:] += u
         sim.state.v[:] = 0.0
