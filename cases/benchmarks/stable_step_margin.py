@@ -11,9 +11,10 @@ four-slope run passes through (:func:`fdem.solve.step_probe.measured_critical_dt
   failure in progress or a debris pile at rest.
 
 ``--runout-check SECONDS`` (with ``--run``) then runs the workflow's runout stage from the run's
-``runout_start.npz`` for that long twice, at the solver's step and at ``--measured-fraction`` (0.8)
-of the critical step measured there, held fixed (an experiment: the solver does not step so),
-and compares the energy ledger, the kinetic energy, the breakage and the displacement.
+``runout_start.npz`` for that long at ``--measured-fraction`` (0.8) of the critical step measured
+there, held fixed (an experiment: the solver does not step so), and sets its energy ledger,
+kinetic energy, breakage and displacement beside the run's own history over the same span
+(``--with-control`` reruns that at the solver's step too, with the code of now).
 
 ``--tangential`` measures once more with the contact's tangential springs in, which the probe
 leaves out (they load on slip increments: ``v = u / dt`` as well as ``x + u``, contact damping
@@ -129,6 +130,29 @@ def omega_with_tangential_springs(sim, iterations: int = 400, rtol: float = 1e-6
     return float(np.sqrt(lam))
 
 
+def history_figures(rows: list[dict], t0: float, t1: float) -> dict:
+    """The runout's figures from its history rows between ``t0`` and ``t1`` [s]: kinetic energy
+    peak and at the end [J/m], crack elements broken, the largest displacement at the end [m],
+    the ledger's largest relative error."""
+    rows = [r for r in rows if t0 - 1e-9 <= float(r["time"]) <= t1 + 1e-9 and r["stage"] == "runout"]
+    broken = lambda r: sum(int(float(r[k])) for k in ("broken_I", "broken_II", "broken_mixed"))  # noqa: E731
+    return {"rows": len(rows), "t_end_s": float(rows[-1]["time"]),
+            "kinetic_peak_J_m": max(float(r["kinetic"]) for r in rows), "kinetic_end_J_m": float(rows[-1]["kinetic"]),
+            "broken_in_runout": broken(rows[-1]) - broken(rows[0]),
+            "max_displacement_end_m": float(rows[-1]["max_displacement"]),
+            "balance_error_relative_max": max(abs(float(r["balance_error_relative"])) for r in rows)}
+
+
+def reference_figures(run: Path, t0: float, seconds: float) -> dict:
+    """The same figures from the run's own ``history.csv`` (the solver's step, the code the run
+    was made with) over the same span of its runout."""
+    import csv
+
+    with (run / "history.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    return history_figures(rows, t0, t0 + seconds)
+
+
 def runout_check(opts, start: Path, seconds: float, fraction_of_measured: float | None) -> dict:
     """The runout stage from ``start`` for ``seconds`` at the solver's step (``None``) or at
     ``fraction_of_measured`` of the critical step measured at ``start``; its figures."""
@@ -149,8 +173,7 @@ def runout_check(opts, start: Path, seconds: float, fraction_of_measured: float 
         fixed = fraction_of_measured * probe.critical_dt
         sim._choose_dt = lambda: fixed  # the experiment: bypass the solver's bound
         out["measured_critical_dt_s"] = probe.critical_dt
-    broken0, step0, n_hist, t0 = int(cracks.broken.sum()), sim.state.step, len(sim.history), sim.state.time
-    x_start = sim.state.x.copy()
+    step0, n_hist, t0 = sim.state.step, len(sim.history), sim.state.time
     stage = runout_stage(SlopeWorkflow(runout_dt_fraction=0.8, runout_time=seconds), response_time(sim.model),
                          float(np.ptp(topo.x0[:, 1])), float(np.linalg.norm(sim.gravity)))
     wall = time.perf_counter()
@@ -160,17 +183,16 @@ def runout_check(opts, start: Path, seconds: float, fraction_of_measured: float 
     except InstabilityError as e:
         out["reason"] = f"unstable: {e}"
     out["wall_s"] = time.perf_counter() - wall
-    rows = sim.history[n_hist:]
-    moved = np.linalg.norm(sim.state.x - x_start, axis=1)
-    out.update({"dt_s": float(sim.dt), "steps": sim.state.step - step0, "simulated_s": sim.state.time - t0,
-                "broken_in_runout": int(cracks.broken.sum()) - broken0,
-                "kinetic_peak_J_m": max(float(r["kinetic"]) for r in rows),
-                "kinetic_end_J_m": float(rows[-1]["kinetic"]),
-                "balance_error_relative_max": max(abs(float(r["balance_error_relative"])) for r in rows),
-                "max_displacement_in_runout_m": float(moved.max()),
-                "mean_displacement_in_runout_m": float(moved.mean())})
+    out.update({"dt_s": float(sim.dt), "steps": sim.state.step - step0, "t0_s": t0,
+                **history_figures(sim.history[n_hist - 1:], t0, t0 + seconds)})
     sim.close()
     return out
+
+
+def describe(r: dict) -> str:
+    return (f"KE peak {r['kinetic_peak_J_m']:.4g} J/m, at the end {r['kinetic_end_J_m']:.4g}; {r['broken_in_runout']} "
+            f"broken; max displacement at the end {r['max_displacement_end_m']:.3g} m; ledger error at most "
+            f"{r['balance_error_relative_max']:.2e}")
 
 
 def main(argv=None) -> dict:
@@ -184,6 +206,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--runout-check", type=float, default=None, metavar="SECONDS",
                     help="with --run: run the runout from runout_start.npz this long at both steps")
     ap.add_argument("--measured-fraction", type=float, default=0.8, help="of the measured critical step (0.8)")
+    ap.add_argument("--with-control", action="store_true",
+                    help="also rerun the runout at the solver's step (else the run's own history is the reference)")
     args = ap.parse_args(argv)
     if (args.scene is None) == (args.run is None):
         ap.error("give one of --scene ANGLE:SPACING or --run DIR")
@@ -235,15 +259,16 @@ def main(argv=None) -> dict:
         print(f"  with the tangential springs: {with_springs:.4g} s ({100 * rec['tangential_effect']:+.2f} %)")
     if args.runout_check is not None:
         rec["runout_check"] = []
-        for frac in (None, args.measured_fraction):
+        fractions = [args.measured_fraction] + ([None] if args.with_control else [])
+        for frac in fractions:
             r = runout_check(opts, args.run / "runout_start.npz", args.runout_check, frac)
             rec["runout_check"].append(r)
-            which = "solver's step" if frac is None else f"{frac:g} of the measured critical step"
-            print(f"  runout {args.runout_check:g} s at the {which} ({r['dt_s']:.4g} s): {r['reason']}; {r['steps']:,} steps, "
-                  f"{r['wall_s']:.0f} s; KE peak {r['kinetic_peak_J_m']:.4g} J/m, end {r['kinetic_end_J_m']:.4g}; "
-                  f"broken {r['broken_in_runout']}; max / mean displacement {r['max_displacement_in_runout_m']:.3g} / "
-                  f"{r['mean_displacement_in_runout_m']:.3g} m; ledger error at most {r['balance_error_relative_max']:.2e}",
-                  flush=True)
+            which = "the solver's step" if frac is None else f"{frac:g} of the measured critical step"
+            print(f"  runout {args.runout_check:g} s at {which} ({r['dt_s']:.4g} s): {r['reason']}; {r['steps']:,} "
+                  f"steps, {r['wall_s']:.0f} s; " + describe(r), flush=True)
+        ref = reference_figures(args.run, rec["runout_check"][0]["t0_s"], args.runout_check)
+        rec["runout_check_reference"] = ref
+        print(f"  the run itself over the same {args.runout_check:g} s (its history.csv): " + describe(ref))
     DOCS.mkdir(parents=True, exist_ok=True)
     path = DOCS / f"{NAME}.json"
     doc = json.loads(path.read_text()) if path.is_file() else {"benchmark": NAME, "records": []}

@@ -287,6 +287,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
     if workflow is not None:
         wf = {"reduction": workflow.reduction, "fos": list(workflow.fos) if workflow.fos else None,
               "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction,
+              **({"runout_step": workflow.runout_step} if workflow.runout_step != "bound" else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -375,6 +376,11 @@ def main(argv=None) -> dict:
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
                              "for the same runout within its spread, and more accurate impact energies, "
                              "docs/pareto.md)")
+    parser.add_argument("--runout-step", choices=["bound", "measured"], default="bound",
+                        help="what --runout-dt-fraction multiplies: the solver's bound on the critical step "
+                             "(default), or the critical step measured on the model when the runout starts "
+                             "(1.26-1.63 times the bound here: 1.25-1.4 times fewer runout steps; CPU only; "
+                             "docs/benchmarks.md)")
     parser.add_argument("--local-fall-area", type=float, default=None, metavar="M2",
                         help="in the reduction steps, a failure that comes to rest with less than this area "
                              "[m^2] moved 1 %% of the model height (all falls so far together) is a block off "
@@ -423,7 +429,8 @@ def main(argv=None) -> dict:
         parser.error(f"--elastic-band: side bands of {extents['boundary_band']:g} m are narrower than one element "
                      f"(--size {args.size:g} m) and would hold no crack element: widen --boundary-band")
     if not resuming:
-        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction))] + (
+        pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)),
+                  ("--runout-step", args.runout_step)] + (
             [("--local-fall-area", f"{args.local_fall_area:g}")] if args.local_fall_area is not None else []) + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
         args.run_record["argv"] = list(args.run_record["argv"]) + [
@@ -433,9 +440,13 @@ def main(argv=None) -> dict:
     try:  # the workflow's settings are checked now, not after hours of stages
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
                                  runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
+                                 runout_step=args.runout_step,
                                  local_fall_area=args.local_fall_area or None)
     except ValueError as err:
         parser.error(str(err))
+    if args.runout_step == "measured" and getattr(args, "backend", "cpu") != "cpu":
+        parser.error(f"--runout-step measured probes the model on the host; --backend {args.backend} steps on the "
+                     "GPU: leave one of them out")
     set_threads(args.threads)
     try:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)

@@ -116,7 +116,7 @@ def workflow(s: dict):
     w = s["workflow"]
     fields = {k: w[k] for k in ("reduction", "reduction_rate", "final_strength", "equilibrium_ratio", "step_time",
                                 "fail_displacement", "runout_time", "rest_kinetic_ratio", "runout_dt_fraction",
-                                "local_fall_area")}
+                                "local_fall_area", "runout_step")}
     if w["factors"] is not None:
         fields["factors"] = tuple(w["factors"])
     if w["fos"] is not None:

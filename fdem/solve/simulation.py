@@ -266,6 +266,9 @@ class Simulation:
         self.dt_fraction = dt_fraction
         self.time_cap = time_cap
         self.user_dt = dt
+        # the critical step measured on the model (fdem.solve.step_probe) that a stage stepping
+        # from it sets for its length (fdem.workflow.stages.Stage.step_from), else None: the bounds
+        self.measured_critical: float | None = None
         self.out_dir = Path(out_dir) if out_dir is not None else None
         # set by a caller that writes its own resumable checkpoint when a run is interrupted (a
         # journaled workflow stage): the run then leaves the interrupted state to it, so that
@@ -403,7 +406,10 @@ class Simulation:
 
     def critical_dt(self) -> tuple[float, dict[str, float]]:
         """The critical (stability limit) step [s] and the limits it combines, by source (while
-        density-scaled: the step the scaled masses were chosen for)."""
+        density-scaled: the step the scaled masses were chosen for; while a stage steps from a
+        measured step, :attr:`measured_critical`)."""
+        if self.measured_critical is not None:
+            return self.measured_critical, {"measured on the model": self.measured_critical}
         if self.inertia is not None:
             return self._scaled_dt, {"density-scaled nodes": self._scaled_dt}
         limits = {"triangles": self.triangle_dt}

@@ -41,7 +41,7 @@ from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
 from fdem.solve.geostatic import crack_strength_check, rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
-from fdem.workflow.stages import Convergence, Failure, Stage, response_time, run_stage
+from fdem.workflow.stages import STEP_FROM, Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import (BracketError, GravityIncrease, check_bracket, default_trial_stage, factor_of_safety,
                                fundamental_damping)
 
@@ -102,6 +102,11 @@ class SlopeWorkflow:
         (docs/pareto.md); 0.8 takes half the steps of 0.4. A single two-body impact loses more of
         its energy at 0.8 (1.5 % with 4 elements across the body, against 0.25 % at 0.4): pass 0.4
         where impact energies themselves are the answer.
+    runout_step : what ``runout_dt_fraction`` multiplies: ``"bound"`` (default) the solver's
+        combined bound on the critical step, or ``"measured"`` the critical step measured on the
+        model when the runout starts (:attr:`fdem.workflow.stages.Stage.step_from`), 1.26-1.63
+        times the bound on the four slopes: 1.25-1.4 times fewer steps at 0.8 (``docs/benchmarks.md``,
+        "How far the step is below the critical one"). CPU only.
     """
 
     reduction: str = "steps"
@@ -117,6 +122,7 @@ class SlopeWorkflow:
     runout_dt_fraction: float | None = 0.8
     trigger: str = "strength"
     local_fall_area: float | None = None
+    runout_step: str = "bound"
 
     def __post_init__(self):
         """Every field checked, the message naming it: a negative time or displacement, an
@@ -155,6 +161,8 @@ class SlopeWorkflow:
                                                         and 0.0 < self.runout_dt_fraction <= 1.0):
             raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got "
                              f"{self.runout_dt_fraction!r}")
+        if self.runout_step not in STEP_FROM:
+            raise ValueError(f"SlopeWorkflow.runout_step must be one of {', '.join(STEP_FROM)}, got {self.runout_step!r}")
         if self.fos is not None:
             try:
                 lower, upper, tol = self.fos
@@ -214,6 +222,9 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     cracks = sim.cracks
     if cracks is None:
         raise ValueError("run_slope_workflow needs crack elements (a CrackSet provider)")
+    if wf.runout_step == "measured" and sim._device is not None:  # refused now, not when the runout starts
+        raise ValueError("runout_step = 'measured' probes the model on the host, and this run steps on the GPU: "
+                         "use runout_step = 'bound' with the cuda backend")
     T = response_time(sim.model)
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
@@ -540,7 +551,7 @@ model's end and the runout goes on; a mass running off the floor ends it."""
 
 def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     """The dynamic runout stage of the workflow: no damping, time-step factor
-    ``wf.runout_dt_fraction``; ends when the kinetic energy has stayed below
+    ``wf.runout_dt_fraction`` of the bound or of the measured critical step (``wf.runout_step``); ends when the kinetic energy has stayed below
     ``wf.rest_kinetic_ratio`` of its peak for one response time ``T`` [s] (after at least
     ``T``), capped at ``wf.runout_time`` or ``max(20 T, 4 sqrt(2 H / g))`` (four free falls over
     the model height ``H`` [m] under gravity ``g`` [m/s^2]); it stops ``left_model`` when a node
@@ -557,7 +568,7 @@ def runout_stage(wf: SlopeWorkflow, T: float, height: float, g: float) -> Stage:
     free_fall = math.sqrt(2.0 * height / g)
     cap = wf.runout_time or max(20.0 * T, 4.0 * free_fall)
     fail_displacement = wf.fail_displacement or 0.01 * height
-    return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction,
+    return Stage("runout", max_time=cap, damping=NO_DAMPING, dt_fraction=wf.runout_dt_fraction, step_from=wf.runout_step,
                  output_interval=min(0.5 * free_fall, cap / 4.0),
                  converge=Convergence(unbalanced_ratio=None, kinetic_ratio=wf.rest_kinetic_ratio, min_time=T, hold_for=T,
                                       drift=0.01 * fail_displacement, drift_window=5.0 * T),

@@ -35,7 +35,11 @@ import numpy as np
 from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.solve.simulation import Simulation
 
-__all__ = ["Convergence", "Failure", "Stage", "StageResult", "response_time", "run_stage"]
+__all__ = ["Convergence", "Failure", "Stage", "StageResult", "STEP_FROM", "response_time", "run_stage"]
+
+
+STEP_FROM = ("bound", "measured")
+"""What a stage's time-step factor multiplies (:attr:`Stage.step_from`)."""
 
 
 # ----------------------------------------------------------------------------- rules
@@ -160,6 +164,14 @@ class Stage:
         ``max_time``, ``check_interval``, ``output_interval``, ``reduction_ramp`` time,
         ``min_time``, ``hold_for``) by the period stretch and divides its mass-proportional
         damping by it, so it runs the same number of response times.
+    step_from : what ``dt_fraction`` is a fraction of: ``"bound"`` (default) the solver's
+        combined bound on the critical step (:meth:`fdem.solve.simulation.Simulation.critical_dt`);
+        ``"measured"`` the critical step measured on the model when the stage starts
+        (:func:`fdem.solve.step_probe.measured_critical_dt`, 21-51 steps of the model), 1.26-1.63
+        times the bound on the four-slope scenes (``docs/benchmarks.md``, "How far the step is
+        below the critical one"), held for the stage (a resumed stage keeps the one it began with).
+        An undamped stage on its own masses only: a density-scaled stage chooses its masses for
+        its step.
     """
 
     name: str
@@ -180,10 +192,19 @@ class Stage:
     density_scaling: bool | None = None
     domain_margin: float | None = None
     escape_share: float | None = None
+    step_from: str = "bound"
 
     def __post_init__(self):
         if not self.name:
             raise ValueError("a stage needs a name")
+        if self.step_from not in STEP_FROM:
+            raise ValueError(f"stage {self.name!r}: step_from must be one of {', '.join(STEP_FROM)}, got {self.step_from!r}")
+        damped = self.damping.mass_proportional != 0.0 or self.damping.local != 0.0 if isinstance(
+            self.damping, Damping) else False
+        if self.step_from == "measured" and (self.density_scaling or (self.density_scaling is None and damped)):
+            raise ValueError(f"stage {self.name!r}: step_from='measured' measures the step of the model's own masses, "
+                             "and this stage runs density-scaled (a damped stage does by default): give "
+                             "density_scaling=False, or step_from='bound'")
         if self.dt_fraction is not None and not 0.0 < self.dt_fraction <= 1.0:
             raise ValueError(f"stage {self.name!r}: dt_fraction (time-step factor) must lie in (0, 1], got {self.dt_fraction}")
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
@@ -211,7 +232,9 @@ class Stage:
 @dataclass
 class StageResult:
     """How a stage went. ``reason``: ``converged``, ``failed``, ``capped`` or ``completed``;
-    ``period_stretch`` > 1 when it ran density-scaled (times are then the scaled model's)."""
+    ``period_stretch`` > 1 when it ran density-scaled (times are then the scaled model's);
+    ``measured_critical_dt`` [s] the critical step measured on the model that a
+    ``step_from="measured"`` stage stepped from (``dt`` is its ``dt_fraction``), else ``None``."""
 
     name: str
     reason: str
@@ -230,6 +253,7 @@ class StageResult:
     detail: str = ""
     period_stretch: float = 1.0
     output_seconds: dict | None = None
+    measured_critical_dt: float | None = None
     """Wall seconds of the stage spent on output frames, history rows and checkpoints
     (``Simulation.output_seconds``), against ``wall_seconds`` in all."""
 
@@ -301,6 +325,28 @@ def hold_escaped(sim: Simulation, out: np.ndarray, share: float, held_before: fl
     return int(held.sum()), area
 
 
+def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> float:
+    """The critical step [s] a ``step_from="measured"`` stage steps from: the one it began with
+    when it is resumed (so that it repeats the uninterrupted run), else measured now on the
+    stage's own masses (:func:`fdem.solve.step_probe.measured_critical_dt`)."""
+    if sim.density_scaled:
+        raise ValueError(f"stage {stage.name!r}: step_from='measured' needs the model's own masses, and it is "
+                         "density-scaled")
+    if saved is not None and saved.get("measured_critical") is not None:
+        return float(saved["measured_critical"])
+    if sim._device is not None:
+        raise ValueError(f"stage {stage.name!r}: step_from='measured' probes the model on the host, and this run "
+                         "steps on the GPU; use step_from='bound' there")
+    from fdem.solve.step_probe import measured_critical_dt
+
+    sim.measured_critical = None  # the probe reports against the bounds
+    probe = measured_critical_dt(sim)
+    if not probe.converged:
+        raise ValueError(f"stage {stage.name!r}: the step probe did not converge ({probe.steps} steps): step from "
+                         "the bounds (step_from='bound')")
+    return probe.critical_dt
+
+
 def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:
     """Run ``stage`` on ``sim`` until its end rule (see the module docstring); returns its result.
 
@@ -358,11 +404,15 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     try:
         if stage.dt_fraction is not None:
             sim.dt_fraction = stage.dt_fraction
+        if stage.step_from == "measured":
+            sim.measured_critical = _measured_critical(sim, stage, saved if kind == "resume" else None)
         sim.dt = sim._choose_dt()
     except ValueError:
         sim.dt_fraction = sim_dt_fraction
+        sim.measured_critical = None
         raise
     dt = sim.dt
+    measured = sim.measured_critical
     check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
     output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
     if not frames:
@@ -475,7 +525,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         return False
 
     def runtime() -> dict:  # what a checkpoint needs to continue this stage (fdem.workflow.journal)
-        return {"name": stage.name, "t0": t0, "step0": step0, "n_total": n_total, "dt": dt, "x_start": x_start,
+        return {"name": stage.name, "t0": t0, "step0": step0, "n_total": n_total, "dt": dt,
+                "measured_critical": measured, "x_start": x_start,
                 "ramp": None if ramp is None else list(ramp), "status": dict(status),
                 "wall_seconds": wall_before + time.perf_counter() - wall, "output_seconds": output_so_far()}
 
@@ -502,6 +553,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         raise
     finally:
         sim.dt_fraction = sim_dt_fraction   # the next stage chooses its step afresh
+        sim.measured_critical = None
         if journal is not None:
             journal.current = None
             sim.caller_checkpoints_interrupts = False
@@ -521,7 +573,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
-        period_stretch=stretch, output_seconds=output_so_far())
+        period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one
         journal.stage_finished(sim, result.as_dict(), runtime() if reason == "capped" else None)

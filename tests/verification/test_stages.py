@@ -497,3 +497,55 @@ def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
     assert r.reason == "failed"
     with pytest.raises(ValueError, match="drift_window"):
         Convergence(drift=1e-3)
+
+
+def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp_path, monkeypatch):
+    """``step_from="measured"``: the stage's step is its factor of the critical step measured on
+    the model when it starts (above the solver's bound), the result says so, and the next stage
+    steps from the bound again; a stage cut by a signal and resumed from its checkpoint keeps the
+    step it began with (no second probe) and ends bit for bit as the stage never cut. Settings
+    that cannot hold are refused before anything runs."""
+    from fdem.solve import step_probe
+    from fdem.workflow.journal import RunJournal
+
+    with pytest.raises(ValueError, match="step_from"):
+        Stage("x", duration=1.0, step_from="guess")
+    with pytest.raises(ValueError, match="density-scaled"):
+        Stage("x", duration=1.0, damping=Damping(mass_proportional=1.0), step_from="measured")
+    with pytest.raises(ValueError, match="runout_step"):
+        SlopeWorkflow(runout_step="guess")
+    assert runout_stage(SlopeWorkflow(runout_step="measured"), 1.0, 10.0, 9.81).step_from == "measured"
+
+    s = planar_slope_scene()
+    T = response_time(s.sim.model)
+    probe = step_probe.measured_critical_dt(s.sim)
+    assert probe.critical_dt > probe.bound_dt
+    stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured")
+    whole = run_stage(s.sim, stage, frames=False)
+    assert whole.dt == pytest.approx(0.8 * probe.critical_dt, rel=1e-6)
+    assert whole.measured_critical_dt == pytest.approx(probe.critical_dt, rel=1e-6)
+    assert s.sim.measured_critical is None
+    after = run_stage(s.sim, Stage("next", duration=0.005 * T), frames=False)
+    assert after.dt == pytest.approx(0.8 * probe.bound_dt) and after.measured_critical_dt is None
+
+    cut = planar_slope_scene(out_dir=tmp_path, pictures=False).sim
+    record_row = cut._record_row
+
+    def stop_on_the_third_row(*a, **k):
+        if sum(1 for r in cut.history if r["stage"] == "runout") >= 3:
+            raise KeyboardInterrupt
+        return record_row(*a, **k)
+
+    monkeypatch.setattr(cut, "_record_row", stop_on_the_third_row)
+    with pytest.raises(KeyboardInterrupt):
+        run_stage(cut, stage, frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
+    cut.close()
+    uncut = planar_slope_scene().sim
+    run_stage(uncut, stage, frames=False)
+    resumed = planar_slope_scene(pictures=False).sim
+    journal = RunJournal.resume_from(resumed, tmp_path / "checkpoint.npz")
+    calls = []
+    monkeypatch.setattr(step_probe, "measured_critical_dt", lambda *a, **k: calls.append(1))
+    end = run_stage(resumed, stage, frames=False, journal=journal)
+    assert not calls and end.dt == whole.dt and end.measured_critical_dt == whole.measured_critical_dt
+    assert np.array_equal(resumed.state.x, uncut.state.x) and np.array_equal(resumed.state.v, uncut.state.v)
