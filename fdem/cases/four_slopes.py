@@ -445,8 +445,8 @@ def main(argv=None) -> dict:
     except ValueError as err:
         parser.error(str(err))
     if args.runout_step == "measured" and getattr(args, "backend", "cpu") != "cpu":
-        parser.error(f"--runout-step measured probes the model on the host; --backend {args.backend} steps on the "
-                     "GPU: leave one of them out")
+        parser.error(f"--runout-step measured probes the model on the host, and --backend {args.backend} steps on "
+                     "the GPU: run on the CPU (--backend cpu), or start the run with --runout-step bound")
     set_threads(args.threads)
     try:
         spacing = args.spacing if args.spacing in ("fine", "coarse") else float(args.spacing)

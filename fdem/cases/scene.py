@@ -172,6 +172,9 @@ def run_scene(parser, args, scene: dict) -> dict:
     check_common(parser, args)
     set_threads(args.threads)
     workflow = scene_workflow(scene)
+    if workflow.runout_step == "measured" and getattr(args, "backend", "cpu") != "cpu":
+        parser.error(f"[workflow] runout_step = 'measured' probes the model on the host, and --backend {args.backend} "
+                     "steps on the GPU: run on the CPU, or set runout_step = 'bound'")
     sc = scene["scene"]
     if sc["mesh"] is None:
         check_mesh_size(parser, scene_geometry(scene), sc["size"])

@@ -37,7 +37,7 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from fdem.solve.model import FIX_X, FIX_Y
 
-__all__ = ["StepProbe", "measured_critical_dt", "element_size"]
+__all__ = ["StepProbe", "measured_critical_dt", "element_size", "velocity_readers"]
 
 
 @dataclass(frozen=True)
@@ -90,13 +90,33 @@ def element_size(x: np.ndarray, triangles: np.ndarray) -> float:
     return float(np.sqrt(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).mean()))
 
 
+def velocity_readers(sim) -> list[str]:
+    """What in ``sim`` reads velocities besides the contact's tangential springs (which the probe
+    leaves out, "What the probe does not see" above), by name: viscous triangles (element
+    damping), contact damping, and any force provider but crack elements and contact (a viscous
+    boundary). Each lowers the critical step of central differences (Belytschko et al. 2014,
+    eq. 6.3.22), and none is in a probe at rest."""
+    from fdem.physics.contact import ContactSet
+    from fdem.physics.cracks import CrackSet
+
+    readers = ["viscous triangles (element damping)"] if sim.use_viscous else []
+    for p in sim.providers:
+        if isinstance(p, ContactSet):
+            if p.damping_ratio > 0.0:
+                readers.append(f"contact damping (ratio {p.damping_ratio:g})")
+        elif not isinstance(p, CrackSet):
+            readers.append(type(p).__name__)
+    return readers
+
+
 def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps: float | None = None,
                          seed: int = 0) -> StepProbe:
     """Measure the critical central-difference step of ``sim`` at its current state [s].
 
     ``max_iterations`` Lanczos restarts at most, ``rtol`` the relative accuracy asked of
     ``omega_max^2``; ``eps`` [m] the finite-difference displacement of the node that moves most
-    (default ``1e-10`` of the mean element size :func:`element_size`); ``seed`` the random start
+    (default ``1e-10`` of the mean element size :func:`element_size`, at least 1000 times the
+    round-off of the largest coordinate); ``seed`` the random start
     vector's. Stability asks for the stiffness of infinitesimal motion, and the contact law has
     two scales that bracket ``eps``: a pair counts as touching, not overlapping, until it reaches
     past the other's edges by ``1e-12`` of an altitude
@@ -111,13 +131,18 @@ def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps
         raise ValueError(f"max_iterations must be at least 1, got {max_iterations}")
     if not 0.0 < rtol < 1.0:
         raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
-    if sim.providers and any(getattr(p, "device", None) is not None for p in sim.providers):
-        raise ValueError("the step probe runs on the host: probe the model before handing it to the device")
+    if sim._device is not None:
+        raise ValueError("the step probe runs on the host, and this simulation steps on the GPU (backend 'cuda')")
+    readers = velocity_readers(sim)
+    if readers:
+        raise ValueError(f"the step probe measures stiffness at rest, and this model has forces that read velocities "
+                         f"({', '.join(readers)}): they lower the critical step, which the probe would not see; "
+                         "step from the bounds")
     bound, limits = sim.critical_dt()
     saved = sim.state_dict()
     x0 = saved["x"]
-    if eps is None:
-        eps = 1e-10 * element_size(x0, sim.triangles)
+    if eps is None:  # above the round-off of the coordinates, however far from the origin they lie
+        eps = max(1e-10 * element_size(x0, sim.triangles), 1e3 * float(np.spacing(np.abs(x0).max())))
     if not eps > 0.0:
         raise ValueError(f"eps must be positive, got {eps}")
     mass = (sim.inertia if sim.inertia is not None else sim.state.mass)[:, None] * np.ones((1, 2))

@@ -129,6 +129,7 @@ class RunJournal:
         runtime = self.marks.pop(CAPPED_MARK, None)
         if runtime is None or runtime.get("name") != last["name"]:
             runtime = {"name": last["name"], "t0": float(last["t_start"]), "dt": float(last["dt"]),
+                       "measured_critical": last.get("measured_critical_dt"),
                        "step0": int(sim.state.step) - int(last["steps"]), "x_start": x_start(), "ramp": None,
                        "status": {"reason": None, "detail": "", "peak": float(last["peak_kinetic_energy"]),
                                   "ratio": float("nan"), "speed": 0.0, "disp": 0.0, "since": None},

@@ -209,6 +209,21 @@ def equilibrium_damping(sim: Simulation) -> Damping:
         return fundamental_damping(sim)
 
 
+def check_measured_step(sim: Simulation) -> None:
+    """Refuse ``runout_step = 'measured'`` on a model whose step cannot be measured: one that
+    steps on the GPU (the probe runs on the host) or has forces on velocities besides the
+    contact's tangential springs (:func:`fdem.solve.step_probe.velocity_readers`)."""
+    from fdem.solve.step_probe import velocity_readers
+
+    if sim._device is not None:
+        raise ValueError("runout_step = 'measured' probes the model on the host, and this run steps on the GPU: "
+                         "use runout_step = 'bound' with the cuda backend")
+    readers = velocity_readers(sim)
+    if readers:
+        raise ValueError(f"runout_step = 'measured' measures the undamped model's step, and this model has forces on "
+                         f"velocities ({', '.join(readers)}), which lower it: use runout_step = 'bound'")
+
+
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None,
                        journal=None) -> dict:
     """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
@@ -222,9 +237,8 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     cracks = sim.cracks
     if cracks is None:
         raise ValueError("run_slope_workflow needs crack elements (a CrackSet provider)")
-    if wf.runout_step == "measured" and sim._device is not None:  # refused now, not when the runout starts
-        raise ValueError("runout_step = 'measured' probes the model on the host, and this run steps on the GPU: "
-                         "use runout_step = 'bound' with the cuda backend")
+    if wf.runout_step == "measured":  # refused now, not when the runout starts hours in
+        check_measured_step(sim)
     T = response_time(sim.model)
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81

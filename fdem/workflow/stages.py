@@ -32,6 +32,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 import numpy as np
+from fdem.io.messages import warn
 from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.solve.simulation import Simulation
 
@@ -170,8 +171,11 @@ class Stage:
         (:func:`fdem.solve.step_probe.measured_critical_dt`, 21-51 steps of the model), 1.26-1.63
         times the bound on the four-slope scenes (``docs/benchmarks.md``, "How far the step is
         below the critical one"), held for the stage (a resumed stage keeps the one it began with).
-        An undamped stage on its own masses only: a density-scaled stage chooses its masses for
-        its step.
+        An undamped stage on its own masses only (damping lowers the critical step, and a
+        density-scaled stage chooses its masses for its step); a model with forces on velocities
+        is refused when the stage starts (:func:`fdem.solve.step_probe.velocity_readers`), and a
+        probe that fails leaves the stage on the bound, with a warning and the reason in its
+        ``detail``; with a user time step (``Simulation(dt=...)``) there is nothing to measure.
     """
 
     name: str
@@ -201,10 +205,9 @@ class Stage:
             raise ValueError(f"stage {self.name!r}: step_from must be one of {', '.join(STEP_FROM)}, got {self.step_from!r}")
         damped = self.damping.mass_proportional != 0.0 or self.damping.local != 0.0 if isinstance(
             self.damping, Damping) else False
-        if self.step_from == "measured" and (self.density_scaling or (self.density_scaling is None and damped)):
-            raise ValueError(f"stage {self.name!r}: step_from='measured' measures the step of the model's own masses, "
-                             "and this stage runs density-scaled (a damped stage does by default): give "
-                             "density_scaling=False, or step_from='bound'")
+        if self.step_from == "measured" and (damped or self.density_scaling):
+            raise ValueError(f"stage {self.name!r}: step_from='measured' measures the step of the undamped model on "
+                             "its own masses, and this stage is damped or density-scaled: step_from='bound'")
         if self.dt_fraction is not None and not 0.0 < self.dt_fraction <= 1.0:
             raise ValueError(f"stage {self.name!r}: dt_fraction (time-step factor) must lie in (0, 1], got {self.dt_fraction}")
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
@@ -234,7 +237,8 @@ class StageResult:
     """How a stage went. ``reason``: ``converged``, ``failed``, ``capped`` or ``completed``;
     ``period_stretch`` > 1 when it ran density-scaled (times are then the scaled model's);
     ``measured_critical_dt`` [s] the critical step measured on the model that a
-    ``step_from="measured"`` stage stepped from (``dt`` is its ``dt_fraction``), else ``None``."""
+    ``step_from="measured"`` stage stepped from (``dt`` is its ``dt_fraction`` of it), else
+    ``None`` (the stage stepped from the bounds, or at a user time step)."""
 
     name: str
     reason: str
@@ -253,9 +257,9 @@ class StageResult:
     detail: str = ""
     period_stretch: float = 1.0
     output_seconds: dict | None = None
-    measured_critical_dt: float | None = None
     """Wall seconds of the stage spent on output frames, history rows and checkpoints
     (``Simulation.output_seconds``), against ``wall_seconds`` in all."""
+    measured_critical_dt: float | None = None
 
     @property
     def converged(self) -> bool:
@@ -325,26 +329,40 @@ def hold_escaped(sim: Simulation, out: np.ndarray, share: float, held_before: fl
     return int(held.sum()), area
 
 
-def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> float:
-    """The critical step [s] a ``step_from="measured"`` stage steps from: the one it began with
-    when it is resumed (so that it repeats the uninterrupted run), else measured now on the
-    stage's own masses (:func:`fdem.solve.step_probe.measured_critical_dt`)."""
+def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tuple[float | None, str]:
+    """The critical step [s] a ``step_from="measured"`` stage steps from, and why it is ``None``
+    (the stage then steps from the bounds): the one it began with when it is resumed (so that it
+    repeats the uninterrupted run), else measured now on the stage's own masses
+    (:func:`fdem.solve.step_probe.measured_critical_dt`). A model that cannot be probed (on the
+    GPU, with forces on velocities, density-scaled) is refused with a ``ValueError``; a probe that
+    does not converge falls back on the bounds rather than end a run hours in."""
+    if sim.user_dt is not None:
+        return None, ""
     if sim.density_scaled:
         raise ValueError(f"stage {stage.name!r}: step_from='measured' needs the model's own masses, and it is "
                          "density-scaled")
     if saved is not None and saved.get("measured_critical") is not None:
-        return float(saved["measured_critical"])
+        return float(saved["measured_critical"]), ""
+    from fdem.solve import step_probe
+
     if sim._device is not None:
         raise ValueError(f"stage {stage.name!r}: step_from='measured' probes the model on the host, and this run "
                          "steps on the GPU; use step_from='bound' there")
-    from fdem.solve.step_probe import measured_critical_dt
-
+    readers = step_probe.velocity_readers(sim)
+    if readers:
+        raise ValueError(f"stage {stage.name!r}: step_from='measured' cannot measure a model with forces on "
+                         f"velocities ({', '.join(readers)}); use step_from='bound'")
     sim.measured_critical = None  # the probe reports against the bounds
-    probe = measured_critical_dt(sim)
-    if not probe.converged:
-        raise ValueError(f"stage {stage.name!r}: the step probe did not converge ({probe.steps} steps): step from "
-                         "the bounds (step_from='bound')")
-    return probe.critical_dt
+    try:
+        probe = step_probe.measured_critical_dt(sim)
+    except (ValueError, ArithmeticError, RuntimeError) as err:  # ARPACK's errors are RuntimeErrors
+        why = f"the step probe failed ({err}): stepped from the bounds"
+    else:
+        if probe.converged:
+            return probe.critical_dt, ""
+        why = f"the step probe did not converge in {probe.steps} steps: stepped from the bounds"
+    warn(f"stage {stage.name!r}: {why}")
+    return None, why
 
 
 def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:
@@ -401,18 +419,22 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         damping = Damping(mass_proportional=damping.mass_proportional / stretch, local=damping.local)
     length = stretch * (stage.duration if stage.duration is not None else (stage.max_time or 10.0 * T))
     sim_dt_fraction = sim.dt_fraction
+    probe_note = ""
     try:
         if stage.dt_fraction is not None:
             sim.dt_fraction = stage.dt_fraction
         if stage.step_from == "measured":
-            sim.measured_critical = _measured_critical(sim, stage, saved if kind == "resume" else None)
+            sim.measured_critical, probe_note = _measured_critical(sim, stage, saved if kind == "resume" else None)
         sim.dt = sim._choose_dt()
-    except ValueError:
+    except BaseException:  # a bad step, or a stop during the probe: the simulation's own settings back
         sim.dt_fraction = sim_dt_fraction
         sim.measured_critical = None
         raise
     dt = sim.dt
     measured = sim.measured_critical
+    # a measured step is the stage's alone: whatever ends the stage, the next one steps from the
+    # bounds (critical_dt() of a cost estimate or the guard included)
+    sim.measured_critical = None
     check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
     output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
     if not frames:
@@ -542,6 +564,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         journal.current = runtime
         sim.caller_checkpoints_interrupts = True  # the journal's checkpoint below is the interrupted state
     try:
+        sim.measured_critical = measured  # sim.run chooses its step again: from the same critical step
         sim.run(n_steps=n_total - done, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
                 output_every=output_steps, stop_when=rule, final_output=frames)
     except KeyboardInterrupt:
@@ -572,7 +595,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         unbalanced_ratio=float(ratio), kinetic_energy=float(row.get("kinetic", 0.0)),
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
-        n_broken=int(cracks.broken.sum()) if cracks is not None else 0, detail=status["detail"],
+        n_broken=int(cracks.broken.sum()) if cracks is not None else 0,
+        detail=status["detail"] + (f"; {probe_note}" if probe_note else ""),
         period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one

@@ -499,6 +499,16 @@ def test_a_slope_at_rest_but_ringing_ends_its_runout_by_the_drift_rule():
         Convergence(drift=1e-3)
 
 
+def undamped_planar_sim(out_dir=None):
+    """The planar slope without its element damping (a viscous force a probe at rest cannot
+    see, so a measured step is refused with it), on a simulation of its own."""
+    from fdem.solve.simulation import Simulation
+
+    s = planar_slope_scene()
+    s.sim.model.set_element_damping(0.0)
+    return Simulation(s.sim.model, providers=s.sim.providers, out_dir=out_dir, pictures=False, progress=False)
+
+
 def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp_path, monkeypatch):
     """``step_from="measured"``: the stage's step is its factor of the critical step measured on
     the model when it starts (above the solver's bound), the result says so, and the next stage
@@ -510,25 +520,27 @@ def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp
 
     with pytest.raises(ValueError, match="step_from"):
         Stage("x", duration=1.0, step_from="guess")
-    with pytest.raises(ValueError, match="density-scaled"):
+    with pytest.raises(ValueError, match="damped or density-scaled"):
         Stage("x", duration=1.0, damping=Damping(mass_proportional=1.0), step_from="measured")
+    with pytest.raises(ValueError, match="damped or density-scaled"):  # damping lowers the critical step
+        Stage("x", duration=1.0, damping=Damping(local=0.8), density_scaling=False, step_from="measured")
     with pytest.raises(ValueError, match="runout_step"):
         SlopeWorkflow(runout_step="guess")
     assert runout_stage(SlopeWorkflow(runout_step="measured"), 1.0, 10.0, 9.81).step_from == "measured"
 
-    s = planar_slope_scene()
-    T = response_time(s.sim.model)
-    probe = step_probe.measured_critical_dt(s.sim)
+    sim = undamped_planar_sim()
+    T = response_time(sim.model)
+    probe = step_probe.measured_critical_dt(sim)
     assert probe.critical_dt > probe.bound_dt
     stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured")
-    whole = run_stage(s.sim, stage, frames=False)
+    whole = run_stage(sim, stage, frames=False)
     assert whole.dt == pytest.approx(0.8 * probe.critical_dt, rel=1e-6)
     assert whole.measured_critical_dt == pytest.approx(probe.critical_dt, rel=1e-6)
-    assert s.sim.measured_critical is None
-    after = run_stage(s.sim, Stage("next", duration=0.005 * T), frames=False)
+    assert sim.measured_critical is None
+    after = run_stage(sim, Stage("next", duration=0.005 * T), frames=False)
     assert after.dt == pytest.approx(0.8 * probe.bound_dt) and after.measured_critical_dt is None
 
-    cut = planar_slope_scene(out_dir=tmp_path, pictures=False).sim
+    cut = undamped_planar_sim(out_dir=tmp_path)
     record_row = cut._record_row
 
     def stop_on_the_third_row(*a, **k):
@@ -540,12 +552,40 @@ def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp
     with pytest.raises(KeyboardInterrupt):
         run_stage(cut, stage, frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
     cut.close()
-    uncut = planar_slope_scene().sim
+    uncut = undamped_planar_sim()
     run_stage(uncut, stage, frames=False)
-    resumed = planar_slope_scene(pictures=False).sim
+    resumed = undamped_planar_sim()
     journal = RunJournal.resume_from(resumed, tmp_path / "checkpoint.npz")
     calls = []
     monkeypatch.setattr(step_probe, "measured_critical_dt", lambda *a, **k: calls.append(1))
     end = run_stage(resumed, stage, frames=False, journal=journal)
     assert not calls and end.dt == whole.dt and end.measured_critical_dt == whole.measured_critical_dt
     assert np.array_equal(resumed.state.x, uncut.state.x) and np.array_equal(resumed.state.v, uncut.state.v)
+
+
+def test_a_measured_step_is_refused_where_the_probe_cannot_see_the_limit_and_falls_back_when_it_fails(monkeypatch):
+    """Element damping lowers the critical step and a probe at rest does not see it: the
+    workflow refuses ``runout_step = 'measured'`` on such a model before any step, and so does a
+    stage. A probe that fails in a run leaves the stage on the bounds, said in its detail."""
+    from fdem.solve import step_probe
+
+    sim = planar_slope_scene().sim  # the planar case's triangles carry element damping
+    assert sim.use_viscous
+    with pytest.raises(ValueError, match="viscous triangles"):
+        run_slope_workflow(sim, SlopeWorkflow(runout_step="measured"))
+    assert sim.state.step == 0
+    T = response_time(sim.model)
+    with pytest.raises(ValueError, match="viscous triangles"):
+        run_stage(sim, Stage("runout", duration=0.01 * T, step_from="measured"), frames=False)
+    assert sim.measured_critical is None and sim.dt_fraction == 0.8
+
+    undamped = undamped_planar_sim()
+
+    def fails(*a, **k):
+        raise RuntimeError("ARPACK error -9999")
+
+    monkeypatch.setattr(step_probe, "measured_critical_dt", fails)
+    bound, _ = undamped.critical_dt()
+    r = run_stage(undamped, Stage("runout", duration=0.01 * T, step_from="measured"), frames=False)
+    assert r.dt == pytest.approx(0.8 * bound) and r.measured_critical_dt is None
+    assert "step probe failed" in r.detail and "ARPACK" in r.detail
