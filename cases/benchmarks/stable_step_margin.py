@@ -134,7 +134,7 @@ def history_figures(rows: list[dict], t0: float, t1: float) -> dict:
     """The runout's figures from its history rows between ``t0`` and ``t1`` [s]: kinetic energy
     peak and at the end [J/m], crack elements broken, the largest displacement at the end [m],
     the ledger's largest relative error."""
-    rows = [r for r in rows if t0 - 1e-9 <= float(r["time"]) <= t1 + 1e-9 and r["stage"] == "runout"]
+    rows = [r for r in rows if t0 - 1e-9 <= float(r["time"]) <= t1 + 1e-9 and r["stage"].startswith("runout")]
     broken = lambda r: sum(int(float(r[k])) for k in ("broken_I", "broken_II", "broken_mixed"))  # noqa: E731
     return {"rows": len(rows), "t_end_s": float(rows[-1]["time"]),
             "kinetic_peak_J_m": max(float(r["kinetic"]) for r in rows), "kinetic_end_J_m": float(rows[-1]["kinetic"]),
@@ -173,6 +173,8 @@ def runout_check(opts, start: Path, seconds: float, fraction_of_measured: float 
         fixed = fraction_of_measured * probe.critical_dt
         sim._choose_dt = lambda: fixed  # the experiment: bypass the solver's bound
         out["measured_critical_dt_s"] = probe.critical_dt
+    for mode, name in ((1, "broken_I"), (2, "broken_II"), (3, "broken_mixed")):  # the history columns of a run
+        sim.add_monitor(name, lambda s, m=mode: float(np.count_nonzero(cracks.failure_mode == m)))
     step0, n_hist, t0 = sim.state.step, len(sim.history), sim.state.time
     stage = runout_stage(SlopeWorkflow(runout_dt_fraction=0.8, runout_time=seconds), response_time(sim.model),
                          float(np.ptp(topo.x0[:, 1])), float(np.linalg.norm(sim.gravity)))
