@@ -37,7 +37,7 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from fdem.solve.model import FIX_X, FIX_Y
 
-__all__ = ["StepProbe", "measured_critical_dt", "element_size", "velocity_readers"]
+__all__ = ["StepProbe", "measured_critical_dt", "element_size", "velocity_readers", "unmeasurable"]
 
 
 @dataclass(frozen=True)
@@ -109,6 +109,20 @@ def velocity_readers(sim) -> list[str]:
     return readers
 
 
+def unmeasurable(sim) -> str:
+    """Why a probe at rest cannot measure ``sim``'s limit (``""``: it can): it steps on the GPU
+    (the probe runs on the host), or forces read velocities (:func:`velocity_readers`), which
+    lower the critical step where the probe does not see them. The one check the probe, a
+    stage stepping from it and the workflow that asks for it make."""
+    if sim._device is not None:
+        return "it steps on the GPU (backend 'cuda'), and the probe runs on the host"
+    readers = velocity_readers(sim)
+    if readers:
+        return (f"forces read velocities ({', '.join(readers)}) and lower the critical step, which a probe at rest "
+                "does not see")
+    return ""
+
+
 def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps: float | None = None,
                          seed: int = 0) -> StepProbe:
     """Measure the critical central-difference step of ``sim`` at its current state [s].
@@ -131,13 +145,9 @@ def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps
         raise ValueError(f"max_iterations must be at least 1, got {max_iterations}")
     if not 0.0 < rtol < 1.0:
         raise ValueError(f"rtol must lie in (0, 1), got {rtol}")
-    if sim._device is not None:
-        raise ValueError("the step probe runs on the host, and this simulation steps on the GPU (backend 'cuda')")
-    readers = velocity_readers(sim)
-    if readers:
-        raise ValueError(f"the step probe measures stiffness at rest, and this model has forces that read velocities "
-                         f"({', '.join(readers)}): they lower the critical step, which the probe would not see; "
-                         "step from the bounds")
+    why = unmeasurable(sim)
+    if why:
+        raise ValueError(f"the step probe cannot measure this model: {why}")
     bound, limits = sim.critical_dt()
     saved = sim.state_dict()
     x0 = saved["x"]

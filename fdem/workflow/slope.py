@@ -210,18 +210,13 @@ def equilibrium_damping(sim: Simulation) -> Damping:
 
 
 def check_measured_step(sim: Simulation) -> None:
-    """Refuse ``runout_step = 'measured'`` on a model whose step cannot be measured: one that
-    steps on the GPU (the probe runs on the host) or has forces on velocities besides the
-    contact's tangential springs (:func:`fdem.solve.step_probe.velocity_readers`)."""
-    from fdem.solve.step_probe import velocity_readers
+    """Refuse ``runout_step = 'measured'`` on a model whose step cannot be measured
+    (:func:`fdem.solve.step_probe.unmeasurable`), before the first stage rather than at the runout."""
+    from fdem.solve.step_probe import unmeasurable
 
-    if sim._device is not None:
-        raise ValueError("runout_step = 'measured' probes the model on the host, and this run steps on the GPU: "
-                         "use runout_step = 'bound' with the cuda backend")
-    readers = velocity_readers(sim)
-    if readers:
-        raise ValueError(f"runout_step = 'measured' measures the undamped model's step, and this model has forces on "
-                         f"velocities ({', '.join(readers)}), which lower it: use runout_step = 'bound'")
+    why = unmeasurable(sim)
+    if why:
+        raise ValueError(f"runout_step = 'measured' cannot measure this model: {why}; use runout_step = 'bound'")
 
 
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None,

@@ -333,8 +333,8 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
     """The critical step [s] a ``step_from="measured"`` stage steps from, and why it is ``None``
     (the stage then steps from the bounds): the one it began with when it is resumed (so that it
     repeats the uninterrupted run), else measured now on the stage's own masses
-    (:func:`fdem.solve.step_probe.measured_critical_dt`). A model that cannot be probed (on the
-    GPU, with forces on velocities, density-scaled) is refused with a ``ValueError``; a probe that
+    (:func:`fdem.solve.step_probe.measured_critical_dt`). A model that cannot be probed
+    (:func:`fdem.solve.step_probe.unmeasurable`, or density-scaled) is refused with a ``ValueError``; a probe that
     does not converge falls back on the bounds rather than end a run hours in."""
     if sim.user_dt is not None:
         return None, ""
@@ -345,13 +345,10 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
         return float(saved["measured_critical"]), ""
     from fdem.solve import step_probe
 
-    if sim._device is not None:
-        raise ValueError(f"stage {stage.name!r}: step_from='measured' probes the model on the host, and this run "
-                         "steps on the GPU; use step_from='bound' there")
-    readers = step_probe.velocity_readers(sim)
-    if readers:
-        raise ValueError(f"stage {stage.name!r}: step_from='measured' cannot measure a model with forces on "
-                         f"velocities ({', '.join(readers)}); use step_from='bound'")
+    why = step_probe.unmeasurable(sim)
+    if why:  # refused, not fallen back on: the bounds would hide a setting that cannot hold
+        raise ValueError(f"stage {stage.name!r}: step_from='measured' cannot measure this model: {why}; use "
+                         "step_from='bound'")
     sim.measured_critical = None  # the probe reports against the bounds
     try:
         probe = step_probe.measured_critical_dt(sim)
