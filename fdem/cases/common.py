@@ -484,25 +484,38 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     cap = runout_stage(workflow, response_time(sim.model), height, g).max_time
     return report_cost(parser, sim, args, cap, f"the runout stage, up to {cap:.3g} s simulated",
-                       dt_fraction=workflow.runout_dt_fraction)
+                       dt_fraction=workflow.runout_dt_fraction, step_from=workflow.runout_step)
 
 
 def report_cost(parser: argparse.ArgumentParser, sim, args, simulated_seconds: float, what: str,
-                dt_fraction: float | None = None) -> dict:
+                dt_fraction: float | None = None, step_from: str = "bound") -> dict:
     """Print (and return, for the summary) the cost estimate of ``sim`` before any stepping:
     the step and what sets it, steps and wall time for ``simulated_seconds`` of ``what``, the
     memory (:func:`fdem.solve.cost.estimate_cost`), and a warning when a penalty cuts the step
     far below the triangles'. Above :data:`CONFIRM_ABOVE_HOURS` of wall time the run needs
-    ``--yes`` (or a "y" at the terminal), so that an option mistaken by 10x is found now."""
+    ``--yes`` (or a "y" at the terminal), so that an option mistaken by 10x is found now.
+
+    ``dt_fraction``: the stage's factor on its critical step; ``step_from="measured"``: that
+    step is the one measured on the model now (:func:`fdem.solve.step_probe.critical_or_bounds`,
+    the probe the stage makes when it starts: on three four-slope scenes the limit at the start
+    was the one at rest to 1e-4, on the fourth 1.57x under it, its limiting element having
+    broken, ``docs/benchmarks/stable_step_margin.json``; so this prices a runout at or above its
+    cost), the bounds when the probe fails."""
     from fdem.solve.cost import dt_warning, estimate_cost
 
     step = sim.dt
-    if dt_fraction is not None:  # the stage's own step
-        sim.dt = dt_fraction * sim.critical_dt()[0]
+    if dt_fraction is not None and step_from == "measured" and sim.user_dt is None:
+        from fdem.solve.step_probe import critical_or_bounds
+
+        sim.measured_critical, why = critical_or_bounds(sim)
+        what += ", stepped from the critical step measured now" if why == "" else f" ({why})"
     try:
+        if dt_fraction is not None:  # the stage's own step
+            sim.dt = dt_fraction * sim.critical_dt()[0]
         estimate = estimate_cost(sim, simulated_seconds=simulated_seconds)
     finally:
         sim.dt = step
+        sim.measured_critical = None
     say(f"cost estimate ({what}):\n  " + estimate.describe().replace("\n", "\n  "))
     warning = dt_warning(estimate)
     if warning:

@@ -123,6 +123,24 @@ def unmeasurable(sim) -> str:
     return ""
 
 
+def critical_or_bounds(sim) -> tuple[float | None, str]:
+    """The measured critical step of ``sim`` [s] (:func:`measured_critical_dt`), or ``None``
+    and why when the probe failed or did not converge: the caller then steps, or prices, from
+    the bounds rather than end a run hours in. The model must be measurable
+    (:func:`unmeasurable`); the probe reports against the bounds, so a measured step already
+    set on ``sim`` is left out while it runs and put back after."""
+    held, sim.measured_critical = sim.measured_critical, None
+    try:
+        probe = measured_critical_dt(sim)
+    except (ValueError, ArithmeticError, RuntimeError) as err:  # ARPACK's errors are RuntimeErrors
+        return None, f"the step probe failed ({err}): stepped from the bounds"
+    finally:
+        sim.measured_critical = held
+    if probe.converged:
+        return probe.critical_dt, ""
+    return None, f"the step probe did not converge in {probe.steps} steps: stepped from the bounds"
+
+
 def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps: float | None = None,
                          seed: int = 0) -> StepProbe:
     """Measure the critical central-difference step of ``sim`` at its current state [s].

@@ -349,17 +349,11 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
     if why:  # refused, not fallen back on: the bounds would hide a setting that cannot hold
         raise ValueError(f"stage {stage.name!r}: step_from='measured' cannot measure this model: {why}; use "
                          "step_from='bound'")
-    sim.measured_critical = None  # the probe reports against the bounds
-    try:
-        probe = step_probe.measured_critical_dt(sim)
-    except (ValueError, ArithmeticError, RuntimeError) as err:  # ARPACK's errors are RuntimeErrors
-        why = f"the step probe failed ({err}): stepped from the bounds"
-    else:
-        if probe.converged:
-            return probe.critical_dt, ""
-        why = f"the step probe did not converge in {probe.steps} steps: stepped from the bounds"
-    warn(f"stage {stage.name!r}: {why}")
-    return None, why
+    sim.measured_critical = None
+    critical, why = step_probe.critical_or_bounds(sim)
+    if critical is None:
+        warn(f"stage {stage.name!r}: {why}")
+    return critical, why
 
 
 def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:

@@ -589,3 +589,29 @@ def test_a_measured_step_is_refused_where_the_probe_cannot_see_the_limit_and_fal
     r = run_stage(undamped, Stage("runout", duration=0.01 * T, step_from="measured"), frames=False)
     assert r.dt == pytest.approx(0.8 * bound) and r.measured_critical_dt is None
     assert "step probe failed" in r.detail and "ARPACK" in r.detail
+
+
+def test_the_cost_estimate_of_a_measured_runout_counts_the_measured_step():
+    """The estimate printed before a run prices a runout that steps from the measured critical
+    step at that step, not at the bound's (1.26-1.63x more steps on the four slopes), and
+    leaves the simulation's step as it found it."""
+    import argparse
+    import math
+    from types import SimpleNamespace
+
+    from fdem.cases.common import report_cost
+    from fdem.solve import step_probe
+
+    sim = undamped_planar_sim()
+    T = response_time(sim.model)
+    probe = step_probe.measured_critical_dt(sim)
+    bound, _ = sim.critical_dt()
+    dt_before = sim.dt
+    args = SimpleNamespace(yes=True, resume=None)
+    parser = argparse.ArgumentParser()
+    on_bound = report_cost(parser, sim, args, 100 * T, "runout", dt_fraction=0.8)
+    measured = report_cost(parser, sim, args, 100 * T, "runout", dt_fraction=0.8, step_from="measured")
+    assert on_bound["steps"] == math.ceil(100 * T / (0.8 * bound) - 1e-9)
+    assert measured["steps"] == math.ceil(100 * T / (0.8 * probe.critical_dt) - 1e-9)
+    assert measured["steps"] < on_bound["steps"] and "measured now" in measured["for"]
+    assert sim.dt == dt_before and sim.measured_critical is None and sim.state.step == 0
