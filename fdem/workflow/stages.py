@@ -170,12 +170,21 @@ class Stage:
         ``"measured"`` the critical step measured on the model when the stage starts
         (:func:`fdem.solve.step_probe.measured_critical_dt`, 21-51 steps of the model), 1.26-1.63
         times the bound on the four-slope scenes (``docs/benchmarks.md``, "How far the step is
-        below the critical one"), held for the stage (a resumed stage keeps the one it began with).
+        below the critical one"), held for the stage (a resumed stage keeps the one it began with)
+        or measured again every ``remeasure_every``.
         An undamped stage on its own masses only (damping lowers the critical step, and a
         density-scaled stage chooses its masses for its step); a model with forces on velocities
         is refused when the stage starts (:func:`fdem.solve.step_probe.velocity_readers`), and a
         probe that fails leaves the stage on the bound, with a warning and the reason in its
         ``detail``; with a user time step (``Simulation(dt=...)``) there is nothing to measure.
+    remeasure_every : simulated time [s] between measurements of the critical step of a
+        ``step_from="measured"`` stage (``None``: the step measured at the start is held). The
+        stage steps at ``dt_fraction`` of the latest, up or down: the limit moves as crack
+        elements break (the high-angle coarse slope's grew 1.57x from its start to rest, its
+        limiting element broken) and contacts form, as an explicit code's global step estimate
+        is renewed during a run (Abaqus/Explicit's "global estimation"). A probe that fails
+        keeps the step of the last one. The measurements are in the result's ``detail`` and
+        every history row's ``dt``.
     """
 
     name: str
@@ -197,6 +206,7 @@ class Stage:
     domain_margin: float | None = None
     escape_share: float | None = None
     step_from: str = "bound"
+    remeasure_every: float | None = None
 
     def __post_init__(self):
         if not self.name:
@@ -208,6 +218,10 @@ class Stage:
         if self.step_from == "measured" and (damped or self.density_scaling):
             raise ValueError(f"stage {self.name!r}: step_from='measured' measures the step of the undamped model on "
                              "its own masses, and this stage is damped or density-scaled: step_from='bound'")
+        _positive_or_none(self.remeasure_every, f"stage {self.name!r}: remeasure_every")
+        if self.remeasure_every is not None and self.step_from != "measured":
+            raise ValueError(f"stage {self.name!r}: remeasure_every renews a measured step, and this stage steps "
+                             f"from the {self.step_from}: give step_from='measured' or no remeasure_every")
         if self.dt_fraction is not None and not 0.0 < self.dt_fraction <= 1.0:
             raise ValueError(f"stage {self.name!r}: dt_fraction (time-step factor) must lie in (0, 1], got {self.dt_fraction}")
         _positive_or_none(self.duration, f"stage {self.name!r}: duration")
@@ -354,6 +368,34 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
     if critical is None:
         warn(f"stage {stage.name!r}: {why}")
     return critical, why
+
+
+def _probes_note(status: dict) -> str:
+    """The renewed measurements of a stage's critical step, for its detail (``""``: none)."""
+    probes = status.get("probes")
+    if not probes or len(probes) < 2:
+        return ""
+    steps = [c for _, c in probes]
+    note = (f"; critical step measured {len(steps)} times, {min(steps) * 1e6:.4g}-{max(steps) * 1e6:.4g} us "
+            f"(first {steps[0] * 1e6:.4g}, last {steps[-1] * 1e6:.4g})")
+    return note + (f"; a probe failed {status['probe_failed']}" if status.get("probe_failed") else "")
+
+
+def _renewed_critical(sim: Simulation, stage: Stage, status: dict, measured: float) -> float:
+    """The critical step [s] a stage renewing its measured step goes on from: measured now
+    (:func:`fdem.solve.step_probe.critical_or_bounds`), or ``measured``, the last one, when the
+    probe fails (said once in the stage's detail). Each measurement goes into ``status["probes"]``
+    as ``[time, critical step]``."""
+    from fdem.solve import step_probe
+
+    critical, why = step_probe.critical_or_bounds(sim)
+    if critical is None:
+        if "probe_failed" not in status:
+            status["probe_failed"] = f"at t = {sim.state.time:.4g} s {why.replace('stepped from the bounds', 'kept the last step')}"
+            warn(f"stage {stage.name!r}: {status['probe_failed']}")
+        return measured
+    status["probes"].append([sim.state.time, critical])
+    return critical
 
 
 def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:
@@ -550,14 +592,38 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     output_before = dict(saved.get("output_seconds") or {}) if kind == "resume" else {}
     output0 = dict(sim.output_seconds)
     wall = time.perf_counter()
-    done = sim.state.step - step0
+    # a measured step renewed every remeasure_every: the stage runs in segments between probes,
+    # whose steps (next_probe_step) and results (probes) a checkpoint keeps, so that a resumed
+    # stage probes on the same steps as the uncut one
+    probing = stage.remeasure_every is not None and measured is not None
+    if probing and status.get("next_probe_step") is None:
+        status["next_probe_step"] = sim.state.step + max(1, sim.steps_to(sim.state.time + stage.remeasure_every))
+        status["probes"] = [[sim.state.time, measured]]
     if journal is not None:
         journal.current = runtime
         sim.caller_checkpoints_interrupts = True  # the journal's checkpoint below is the interrupted state
     try:
-        sim.measured_critical = measured  # sim.run chooses its step again: from the same critical step
-        sim.run(n_steps=n_total - done, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
-                output_every=output_steps, stop_when=rule, final_output=frames)
+        while True:
+            done = sim.state.step - step0
+            n = n_total - done
+            if probing:
+                n = max(0, min(n, status["next_probe_step"] - sim.state.step))
+            sim.measured_critical = measured  # sim.run chooses its step again: from the same critical step
+            sim.run(n_steps=n, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
+                    output_every=output_steps, stop_when=rule, final_output=frames and not probing)
+            if (not probing or status["reason"] is not None or sim.state.step - step0 - done < n
+                    or sim.state.step - step0 >= n_total):
+                break
+            measured = _renewed_critical(sim, stage, status, measured)
+            sim.measured_critical = measured
+            dt = sim.dt = sim._choose_dt()
+            n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
+            check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
+            if frames:
+                output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
+            status["next_probe_step"] = sim.state.step + max(1, sim.steps_to(sim.state.time + stage.remeasure_every))
+        if probing and frames:
+            sim.write_output()
     except KeyboardInterrupt:
         from fdem.solve.simulation import STOP
 
@@ -587,7 +653,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0,
-        detail=status["detail"] + (f"; {probe_note}" if probe_note else ""),
+        detail=status["detail"] + (f"; {probe_note}" if probe_note else "") + _probes_note(status),
         period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one

@@ -615,3 +615,68 @@ def test_the_cost_estimate_of_a_measured_runout_counts_the_measured_step():
     assert measured["steps"] == math.ceil(100 * T / (0.8 * probe.critical_dt) - 1e-9)
     assert measured["steps"] < on_bound["steps"] and "measured now" in measured["for"]
     assert sim.dt == dt_before and sim.measured_critical is None and sim.state.step == 0
+
+
+def test_a_stage_renews_its_measured_step_and_a_resume_probes_on_the_same_steps(tmp_path, monkeypatch):
+    """``remeasure_every``: the stage measures its critical step again at that interval of
+    simulated time and steps at its factor of the latest measurement, up or down (scripted
+    probes: the history's step follows them, and the stage still ends at its end time); with
+    the real probe, a stage cut by a signal and resumed from its checkpoint probes on the same
+    steps as the uncut stage and ends bit for bit as it."""
+    from fdem.solve import step_probe
+    from fdem.workflow.journal import RunJournal
+
+    with pytest.raises(ValueError, match="remeasure_every"):
+        Stage("x", duration=1.0, remeasure_every=0.1)  # a bound step has nothing to renew
+    with pytest.raises(ValueError, match="remeasure_every"):
+        Stage("x", duration=1.0, step_from="measured", remeasure_every=-1.0)
+    assert runout_stage(SlopeWorkflow(runout_step="measured"), 0.5, 10.0, 9.81).remeasure_every == 0.5
+    assert runout_stage(SlopeWorkflow(), 0.5, 10.0, 9.81).remeasure_every is None
+
+    sim = undamped_planar_sim()
+    T = response_time(sim.model)
+    real = step_probe.measured_critical_dt(sim).critical_dt
+    script = [real, 0.9 * real, 1.1 * real, 0.95 * real]
+    monkeypatch.setattr(step_probe, "critical_or_bounds", lambda s: (script.pop(0), "") if script else (None, "no"))
+    stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.06 * T)
+    r = run_stage(sim, stage, frames=False)
+    steps_dt = [row["dt"] for row in sim.history if row["stage"] == "runout"]
+    seen = list(dict.fromkeys(steps_dt))  # the steps in the order they were taken
+    assert seen == pytest.approx([0.8 * real, 0.72 * real, 0.88 * real, 0.76 * real], rel=1e-12)
+    assert abs(r.t_end - (r.t_start + 0.2 * T)) < r.dt and r.reason == "completed"
+    assert "measured 4 times" in r.detail and r.measured_critical_dt == pytest.approx(0.95 * real)
+    assert sim.measured_critical is None
+    monkeypatch.undo()
+
+    stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.05 * T)
+    cut = undamped_planar_sim(out_dir=tmp_path)
+    record_row = cut._record_row
+
+    def stop_on_the_sixth_row(*a, **k):
+        if sum(1 for r in cut.history if r["stage"] == "runout") >= 6:
+            raise KeyboardInterrupt
+        return record_row(*a, **k)
+
+    monkeypatch.setattr(cut, "_record_row", stop_on_the_sixth_row)
+    with pytest.raises(KeyboardInterrupt):
+        run_stage(cut, stage, frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
+    cut.close()
+    monkeypatch.undo()
+    calls = []
+    probe = step_probe.measured_critical_dt
+
+    def counted(s, *a, **k):
+        calls.append(s.state.step)
+        return probe(s, *a, **k)
+
+    monkeypatch.setattr(step_probe, "measured_critical_dt", counted)
+    uncut = undamped_planar_sim()
+    whole = run_stage(uncut, stage, frames=False)
+    uncut_calls, calls[:] = list(calls), []
+    resumed = undamped_planar_sim()
+    journal = RunJournal.resume_from(resumed, tmp_path / "checkpoint.npz")
+    end = run_stage(resumed, stage, frames=False, journal=journal)
+    assert len(uncut_calls) == 4  # at the start and at 0.05, 0.10 and 0.15 T
+    assert calls and calls == uncut_calls[-len(calls):]  # the probes after the cut, on the same steps
+    assert end.dt == whole.dt and end.detail == whole.detail
+    assert np.array_equal(resumed.state.x, uncut.state.x) and np.array_equal(resumed.state.v, uncut.state.v)
