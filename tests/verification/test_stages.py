@@ -509,6 +509,26 @@ def undamped_planar_sim(out_dir=None):
     return Simulation(s.sim.model, providers=s.sim.providers, out_dir=out_dir, pictures=False, progress=False)
 
 
+def cut_at_row(stage, rows, folder):
+    """Run ``stage`` on the undamped planar slope with a journal in ``folder`` and stop it as a
+    signal would when its ``rows``-th history row is due: its checkpoint is then the stage in
+    progress, to resume from."""
+    from fdem.workflow.journal import RunJournal
+
+    cut = undamped_planar_sim(out_dir=folder)
+    record_row = cut._record_row
+
+    def stop(*a, **k):
+        if sum(1 for r in cut.history if r["stage"] == stage.name) >= rows:
+            raise KeyboardInterrupt
+        return record_row(*a, **k)
+
+    cut._record_row = stop
+    with pytest.raises(KeyboardInterrupt):
+        run_stage(cut, stage, frames=False, journal=RunJournal(folder / "checkpoint.npz"))
+    cut.close()
+
+
 def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp_path, monkeypatch):
     """``step_from="measured"``: the stage's step is its factor of the critical step measured on
     the model when it starts (above the solver's bound), the result says so, and the next stage
@@ -540,18 +560,7 @@ def test_a_stage_steps_from_the_measured_critical_step_and_a_resume_keeps_it(tmp
     after = run_stage(sim, Stage("next", duration=0.005 * T), frames=False)
     assert after.dt == pytest.approx(0.8 * probe.bound_dt) and after.measured_critical_dt is None
 
-    cut = undamped_planar_sim(out_dir=tmp_path)
-    record_row = cut._record_row
-
-    def stop_on_the_third_row(*a, **k):
-        if sum(1 for r in cut.history if r["stage"] == "runout") >= 3:
-            raise KeyboardInterrupt
-        return record_row(*a, **k)
-
-    monkeypatch.setattr(cut, "_record_row", stop_on_the_third_row)
-    with pytest.raises(KeyboardInterrupt):
-        run_stage(cut, stage, frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
-    cut.close()
+    cut_at_row(stage, 3, tmp_path)
     uncut = undamped_planar_sim()
     run_stage(uncut, stage, frames=False)
     resumed = undamped_planar_sim()
@@ -649,19 +658,7 @@ def test_a_stage_renews_its_measured_step_and_a_resume_probes_on_the_same_steps(
     monkeypatch.undo()
 
     stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.05 * T)
-    cut = undamped_planar_sim(out_dir=tmp_path)
-    record_row = cut._record_row
-
-    def stop_on_the_sixth_row(*a, **k):
-        if sum(1 for r in cut.history if r["stage"] == "runout") >= 6:
-            raise KeyboardInterrupt
-        return record_row(*a, **k)
-
-    monkeypatch.setattr(cut, "_record_row", stop_on_the_sixth_row)
-    with pytest.raises(KeyboardInterrupt):
-        run_stage(cut, stage, frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
-    cut.close()
-    monkeypatch.undo()
+    cut_at_row(stage, 6, tmp_path)
     calls = []
     probe = step_probe.measured_critical_dt
 
