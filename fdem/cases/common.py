@@ -503,21 +503,25 @@ def report_cost(parser: argparse.ArgumentParser, sim, args, simulated_seconds: f
     cost), the bounds when the probe fails."""
     from fdem.solve.cost import dt_warning, estimate_cost
 
-    step = sim.dt
-    if dt_fraction is not None and step_from == "measured" and sim.user_dt is None:
-        from fdem.solve.step_probe import critical_or_bounds
-
-        sim.measured_critical, why = critical_or_bounds(sim)
-        what += ", stepped from the critical step measured now" if why == "" else f" ({why})"
+    step, held = sim.dt, sim.measured_critical
     try:
         if dt_fraction is not None:  # the stage's own step
             sim.dt = dt_fraction * sim.critical_dt()[0]
-        estimate = estimate_cost(sim, simulated_seconds=simulated_seconds)
+        estimate = warned = estimate_cost(sim, simulated_seconds=simulated_seconds)  # the bounds, by source
+        if dt_fraction is not None and step_from == "measured" and sim.user_dt is None:
+            from fdem.solve.step_probe import critical_or_bounds
+
+            sim.measured_critical, why = critical_or_bounds(sim)
+            if sim.measured_critical is not None:
+                what += ", stepped from the critical step measured now"
+                sim.dt = dt_fraction * sim.critical_dt()[0]
+                estimate = estimate_cost(sim, simulated_seconds=simulated_seconds)
+            else:
+                what += f" ({why})"
     finally:
-        sim.dt = step
-        sim.measured_critical = None
+        sim.dt, sim.measured_critical = step, held
     say(f"cost estimate ({what}):\n  " + estimate.describe().replace("\n", "\n  "))
-    warning = dt_warning(estimate)
+    warning = dt_warning(warned)  # a penalty far stiffer than the rock: read off the bounds' sources
     if warning:
         warn(warning)
     hours = (estimate.wall_seconds or 0.0) / 3600.0

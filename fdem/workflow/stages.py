@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from fdem.io.messages import warn
 from fdem.solve.damping import NO_DAMPING, Damping
-from fdem.solve.simulation import Simulation
+from fdem.solve.simulation import STOP, Simulation
 
 __all__ = ["Convergence", "Failure", "Stage", "StageResult", "STEP_FROM", "response_time", "run_stage"]
 
@@ -355,8 +355,8 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
     if sim.density_scaled:
         raise ValueError(f"stage {stage.name!r}: step_from='measured' needs the model's own masses, and it is "
                          "density-scaled")
-    if saved is not None and saved.get("measured_critical") is not None:
-        return float(saved["measured_critical"]), ""
+    if saved is not None and "measured_critical" in saved:  # resumed: the step it began with, bound or measured
+        return (None if saved["measured_critical"] is None else float(saved["measured_critical"])), ""
     from fdem.solve import step_probe
 
     why = step_probe.unmeasurable(sim)
@@ -372,30 +372,57 @@ def _measured_critical(sim: Simulation, stage: Stage, saved: dict | None) -> tup
 
 def _probes_note(status: dict) -> str:
     """The renewed measurements of a stage's critical step, for its detail (``""``: none)."""
-    probes = status.get("probes")
-    if not probes or len(probes) < 2:
-        return ""
-    steps = [c for _, c in probes]
-    note = (f"; critical step measured {len(steps)} times, {min(steps) * 1e6:.4g}-{max(steps) * 1e6:.4g} us "
-            f"(first {steps[0] * 1e6:.4g}, last {steps[-1] * 1e6:.4g})")
-    return note + (f"; a probe failed {status['probe_failed']}" if status.get("probe_failed") else "")
+    probes = status.get("probes") or []
+    note = ""
+    if len(probes) >= 2:
+        raw, used = [p[1] * 1e6 for p in probes], [p[2] * 1e6 for p in probes]
+        note = (f"; critical step measured {len(raw)} times, {min(raw):.4g}-{max(raw):.4g} us (first {raw[0]:.4g}, "
+                f"last {raw[-1]:.4g}), stepped from {min(used):.4g}-{max(used):.4g} us")
+        if status.get("held_to_contact"):
+            note += f" ({status['held_to_contact']} rise(s) held to the contact's bound)"
+    if status.get("probe_failed"):
+        note += f"; a probe failed {status['probe_failed']}"
+    return note
+
+
+def _schedule_probe(sim: Simulation, stage: Stage, status: dict) -> None:
+    """The next renewal of a measured step, ``remeasure_every`` from now: its time and step."""
+    status["next_probe_time"] = sim.state.time + stage.remeasure_every
+    status["next_probe_step"] = sim.state.step + max(1, sim.steps_to(status["next_probe_time"]))
+
+
+def _contact_bound(sim: Simulation) -> float | None:
+    """The contact's own bound on the critical step [s] (the face-to-face limit of any contact
+    that may form, :meth:`fdem.physics.contact.ContactSet.stable_dt`), or ``None`` without contact."""
+    from fdem.physics.contact import ContactSet
+
+    bounds = [p.stable_dt(sim.state.mass) for p in sim.providers if isinstance(p, ContactSet)]
+    return min(bounds) if bounds else None
 
 
 def _renewed_critical(sim: Simulation, stage: Stage, status: dict, measured: float) -> float:
     """The critical step [s] a stage renewing its measured step goes on from: measured now
     (:func:`fdem.solve.step_probe.critical_or_bounds`), or ``measured``, the last one, when the
-    probe fails (said once in the stage's detail). Each measurement goes into ``status["probes"]``
-    as ``[time, critical step]``."""
+    probe fails (said in the stage's detail). A fall is taken whole; a rise at most to the
+    contact's own bound (:func:`_contact_bound`) when that lies above ``measured``: the probe
+    sees the contacts of the moment, and one that forms after it is bounded by that limit alone.
+    Each measurement goes into ``status["probes"]`` as ``[time, measured now, stepped from]``."""
     from fdem.solve import step_probe
 
     critical, why = step_probe.critical_or_bounds(sim)
     if critical is None:
         if "probe_failed" not in status:
-            status["probe_failed"] = f"at t = {sim.state.time:.4g} s {why.replace('stepped from the bounds', 'kept the last step')}"
+            status["probe_failed"] = f"at t = {sim.state.time:.4g} s ({why.replace('stepped from the bounds', 'kept the last step')})"
             warn(f"stage {stage.name!r}: {status['probe_failed']}")
         return measured
-    status["probes"].append([sim.state.time, critical])
-    return critical
+    used = critical
+    if critical > measured:
+        bound = _contact_bound(sim)
+        if bound is not None and critical > max(measured, bound):
+            used = max(measured, bound)
+            status["held_to_contact"] = status.get("held_to_contact", 0) + 1
+    status["probes"].append([sim.state.time, critical, used])
+    return used
 
 
 def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) -> StageResult:
@@ -493,6 +520,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         status = {"reason": None, "detail": "", "peak": 0.0, "ratio": math.nan, "speed": 0.0, "disp": 0.0,
                   "since": None}
     conv = stage.converge
+    if probe_note:  # kept with the stage, so that a resumed stage still says why it stepped from the bounds
+        status["probe_note"] = probe_note
     if "limit" not in status:  # the ratio limit, raised to the round-off floor once per stage (kept on resume)
         status["limit"] = None
         if conv is not None and conv.unbalanced_ratio is not None:
@@ -597,36 +626,49 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     # stage probes on the same steps as the uncut one
     probing = stage.remeasure_every is not None and measured is not None
     if probing and status.get("next_probe_step") is None:
-        status["next_probe_step"] = sim.state.step + max(1, sim.steps_to(sim.state.time + stage.remeasure_every))
-        status["probes"] = [[sim.state.time, measured]]
+        _schedule_probe(sim, stage, status)
+        status["probes"] = [[sim.state.time, measured, measured]]
+    elif probing and kind == "resume" and float(saved.get("dt", dt)) != dt:
+        # resumed with another step (after an instability): the next probe at the time it stood for
+        status["next_probe_step"] = sim.state.step + max(0, sim.steps_to(status["next_probe_time"]))
     if journal is not None:
         journal.current = runtime
         sim.caller_checkpoints_interrupts = True  # the journal's checkpoint below is the interrupted state
     try:
-        while True:
+        final_written = False
+        while status["reason"] is None:  # a stage resumed after its rule held has nothing left to run
             done = sim.state.step - step0
             n = n_total - done
-            if probing:
-                n = max(0, min(n, status["next_probe_step"] - sim.state.step))
+            last = not probing or n <= status["next_probe_step"] - sim.state.step
+            if not last:
+                n = max(0, status["next_probe_step"] - sim.state.step)
             sim.measured_critical = measured  # sim.run chooses its step again: from the same critical step
             sim.run(n_steps=n, phase=done, damping=damping, stage=stage.name, history_every=check_steps,
-                    output_every=output_steps, stop_when=rule, final_output=frames and not probing)
-            if (not probing or status["reason"] is not None or sim.state.step - step0 - done < n
-                    or sim.state.step - step0 >= n_total):
+                    output_every=output_steps, stop_when=rule, final_output=frames and last)
+            final_written = last
+            if last or status["reason"] is not None or sim.state.step - step0 - done < n:
                 break
-            measured = _renewed_critical(sim, stage, status, measured)
-            sim.measured_critical = measured
-            dt = sim.dt = sim._choose_dt()
-            n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
-            check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
-            if frames:
-                output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
-            status["next_probe_step"] = sim.state.step + max(1, sim.steps_to(sim.state.time + stage.remeasure_every))
-        if probing and frames:
-            sim.write_output()
+            STOP.running += 1  # a signal waits for the next step: the renewal is made whole or not begun
+            try:
+                if frames and (sim.state.step - step0) % output_steps == 0:
+                    sim.write_output()  # a frame due on the segment's last step (run writes it only at the end)
+                measured = _renewed_critical(sim, stage, status, measured)
+                sim.measured_critical = measured
+                dt = sim.dt = sim._choose_dt()
+                n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
+                check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
+                if frames:
+                    output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
+                _schedule_probe(sim, stage, status)
+            finally:
+                STOP.running -= 1
+        if frames and probing and not final_written:  # the stage's rule ended a segment before its last
+            STOP.running += 1
+            try:
+                sim.write_output()
+            finally:
+                STOP.running -= 1
     except KeyboardInterrupt:
-        from fdem.solve.simulation import STOP
-
         if journal is not None and not STOP.forced:  # stopped at a whole step: the stage continues from here
             journal.write(sim, "interrupted")  # first: the file a resume needs
             sim.write_interrupted(checkpoint=False)  # then the state's .vtu, to look at
@@ -653,7 +695,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         peak_kinetic_energy=float(status["peak"]), max_speed=_max_norm(sim.state.v, nodes),
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0,
-        detail=status["detail"] + (f"; {probe_note}" if probe_note else "") + _probes_note(status),
+        detail=status["detail"] + (f"; {status['probe_note']}" if status.get("probe_note") else "") + _probes_note(status),
         period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one

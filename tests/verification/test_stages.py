@@ -642,19 +642,24 @@ def test_a_stage_renews_its_measured_step_and_a_resume_probes_on_the_same_steps(
     assert runout_stage(SlopeWorkflow(runout_step="measured"), 0.5, 10.0, 9.81).remeasure_every == 0.5
     assert runout_stage(SlopeWorkflow(), 0.5, 10.0, 9.81).remeasure_every is None
 
+    from fdem.workflow.stages import _contact_bound
+
     sim = undamped_planar_sim()
     T = response_time(sim.model)
     real = step_probe.measured_critical_dt(sim).critical_dt
-    script = [real, 0.9 * real, 1.1 * real, 0.95 * real]
+    contact = _contact_bound(sim)
+    assert 1.02 * real < contact < 1.1 * real  # this scene: a rise to 1.1 is above the contact's own bound
+    script = [real, 0.9 * real, 1.02 * real, 1.1 * real, 0.95 * real]
     monkeypatch.setattr(step_probe, "critical_or_bounds", lambda s: (script.pop(0), "") if script else (None, "no"))
-    stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.06 * T)
+    stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.045 * T)
     r = run_stage(sim, stage, frames=False)
     steps_dt = [row["dt"] for row in sim.history if row["stage"] == "runout"]
     seen = list(dict.fromkeys(steps_dt))  # the steps in the order they were taken
-    assert seen == pytest.approx([0.8 * real, 0.72 * real, 0.88 * real, 0.76 * real], rel=1e-12)
+    # a fall taken whole, a rise taken whole up to the contact's bound and held to it above
+    assert seen == pytest.approx([0.8 * real, 0.72 * real, 0.816 * real, 0.8 * contact, 0.76 * real], rel=1e-12)
     assert abs(r.t_end - (r.t_start + 0.2 * T)) < r.dt and r.reason == "completed"
-    assert "measured 4 times" in r.detail and r.measured_critical_dt == pytest.approx(0.95 * real)
-    assert sim.measured_critical is None
+    assert "measured 5 times" in r.detail and "1 rise(s) held to the contact's bound" in r.detail
+    assert r.measured_critical_dt == pytest.approx(0.95 * real) and sim.measured_critical is None
     monkeypatch.undo()
 
     stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", remeasure_every=0.05 * T)
@@ -677,3 +682,23 @@ def test_a_stage_renews_its_measured_step_and_a_resume_probes_on_the_same_steps(
     assert calls and calls == uncut_calls[-len(calls):]  # the probes after the cut, on the same steps
     assert end.dt == whole.dt and end.detail == whole.detail
     assert np.array_equal(resumed.state.x, uncut.state.x) and np.array_equal(resumed.state.v, uncut.state.v)
+
+
+def test_renewals_that_find_the_same_step_keep_the_frames_and_the_end(tmp_path, monkeypatch):
+    """A stage renewing a measured step that does not move writes the frames the stage holding
+    it writes (one due on a segment's last step included) and ends on the same step."""
+    from fdem.solve import step_probe
+
+    real = step_probe.measured_critical_dt(undamped_planar_sim()).critical_dt
+    monkeypatch.setattr(step_probe, "critical_or_bounds", lambda s: (real, ""))
+    ends, frames = [], []
+    for k, every in enumerate((None, 0.05)):
+        sim = undamped_planar_sim(out_dir=tmp_path / str(k))
+        T = response_time(sim.model)
+        stage = Stage("runout", duration=0.2 * T, dt_fraction=0.8, step_from="measured", output_interval=0.05 * T,
+                      remeasure_every=None if every is None else every * T)
+        r = run_stage(sim, stage, frames=True)
+        ends.append((r.steps, r.dt))
+        frames.append(sorted(f.name for f in (tmp_path / str(k)).glob("*.vtu")))
+        sim.close()
+    assert ends[0] == ends[1] and frames[0] == frames[1] and len(frames[0]) >= 5
