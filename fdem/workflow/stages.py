@@ -179,7 +179,8 @@ class Stage:
         ``detail``; with a user time step (``Simulation(dt=...)``) there is nothing to measure.
     remeasure_every : simulated time [s] between measurements of the critical step of a
         ``step_from="measured"`` stage (``None``: the step measured at the start is held). The
-        stage steps at ``dt_fraction`` of the latest, up or down: the limit moves as crack
+        stage steps at ``dt_fraction`` of the latest, down, or up at most to the contact's own
+        bound (:func:`_renewed_critical`): the limit moves as crack
         elements break (the high-angle coarse slope's grew 1.57x from its start to rest, its
         limiting element broken) and contacts form, as an explicit code's global step estimate
         is renewed during a run (Abaqus/Explicit's "global estimation"). A probe that fails
