@@ -378,8 +378,8 @@ def main(argv=None) -> dict:
                              "docs/pareto.md)")
     parser.add_argument("--runout-step", choices=["bound", "measured"], default="bound",
                         help="what --runout-dt-fraction multiplies: the solver's bound on the critical step "
-                             "(default), or the critical step measured on the model when the runout starts "
-                             "(1.26-1.63 times the bound here: 1.25-1.4 times fewer runout steps; CPU only; "
+                             "(default), or the critical step measured on the model when the runout starts and "
+                             "again every response time (1.26-1.63 times the bound here: 1.25-1.4 times fewer runout steps; CPU only; "
                              "docs/benchmarks.md)")
     parser.add_argument("--local-fall-area", type=float, default=None, metavar="M2",
                         help="in the reduction steps, a failure that comes to rest with less than this area "

@@ -184,8 +184,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                  open_low=True, open_high=True),
         "runout_dt_fraction": _f("time-step factor of the runout [-]", 0.8, **FRACTION),
         "runout_step": Key("str", "what the runout's time-step factor multiplies: the solver's bound on the critical "
-                                  "step, or the critical step measured on the model when the runout starts (1.26-1.63 "
-                                  "times the bound on the four slopes; CPU only)", default="bound",
+                                  "step, or the critical step measured on the model when the runout starts and again every "
+                                  "response time (1.26-1.63 times the bound on the four slopes; CPU only)", default="bound",
                            choices=("bound", "measured")),
         "local_fall_area": _f("area moved the failure displacement below which a fall that came to rest is a block "
                               "off the face and the reduction steps carry on [m^2] (default: none, any fall ends "
