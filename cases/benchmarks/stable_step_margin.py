@@ -16,6 +16,11 @@ there, held fixed (an experiment: the solver does not step so), and sets its ene
 kinetic energy, breakage and displacement beside the run's own history over the same span
 (``--with-control`` reruns that at the solver's step too, with the code of now).
 
+``--at-rest RUN RUN ...`` reads runs already made to rest (a run's folder, or a summary published
+in ``docs/cases/rest/``), one stepping its runout from the measured step beside others at the
+bound, and sets their figures at rest side by side: the runout's steps and step, and what the
+slope did.
+
 ``--tangential`` measures once more with the contact's tangential springs in, which the probe
 leaves out (they load on slip increments: ``v = u / dt`` as well as ``x + u``, contact damping
 off, no other force on velocities in a four-slope runout; power iteration, as the response is
@@ -27,6 +32,9 @@ Prints and saves ``docs/benchmarks/stable_step_margin.json`` (records merged by 
         --crest-length 60 --toe-length 90 --label low_coarse_0.5_offset0_start
     NUMBA_NUM_THREADS=1 python cases/benchmarks/stable_step_margin.py --run runs/s40/high_coarse_1.0_offset0_local \\
         --label high_coarse_1.0_offset0_at_rest --tangential
+    python cases/benchmarks/stable_step_margin.py --label low_coarse_1.0_offset0_to_rest --at-rest \\
+        runs/s43/low_coarse_1.0_offset0_measured runs/s43/low_coarse_1.0_offset0_bound \\
+        docs/cases/rest/low_coarse_1.0_crest60_toe90_offset0.json
 """
 from __future__ import annotations
 
@@ -191,6 +199,40 @@ def runout_check(opts, start: Path, seconds: float, fraction_of_measured: float 
     return out
 
 
+def figures_at_rest(where: Path) -> dict:
+    """What a run to rest did and what its runout cost, from its ``summary.json`` (``where`` a
+    run's folder) or a published summary (``where`` a ``.json``), with the commit it ran at."""
+    summary_path = where if where.suffix == ".json" else where / "summary.json"
+    record_path = where.with_name(where.stem + "_run.json") if where.suffix == ".json" else where / "run.json"
+    s = json.loads(summary_path.read_text())
+    record = json.loads(record_path.read_text()) if record_path.is_file() else {}
+    stages = (s.get("workflow") or {}).get("stages") or []
+    runout = [st for st in stages if st["name"].startswith("runout")][-1]
+    run, ke, tags = s.get("runout") or {}, s.get("kinetic_energy") or {}, s.get("cracks_by_tag") or {}
+    return {"run": str(where), "commit": ((record.get("source") or {}).get("commit") or "")[:7],
+            "step_from": "measured" if runout.get("measured_critical_dt") else "bound",
+            "runout_steps": runout["steps"], "runout_dt_s": runout["dt"], "runout_wall_s": runout["wall_seconds"],
+            "runout_reason": runout["reason"], "runout_t_s": runout["t_end"] - runout["t_start"],
+            "runout_detail": runout.get("detail", ""),
+            "max_displacement_m": run.get("max_displacement_m"), "runout_distance_m": run.get("runout_distance_m"),
+            "front_m": run.get("runout_front_max_m"), "displaced_area_m2": run.get("displaced_area_m2"),
+            "kinetic_peak_J_m": ke.get("peak_J_per_m"), "released_gravity_J_m": ke.get("released_gravity_J_per_m"),
+            "broken_rock": (tags.get("rock") or {}).get("broken"), "broken_joints": (tags.get("joints") or {}).get("broken"),
+            "ledger_error_relative": s.get("ledger_error_relative")}
+
+
+def print_at_rest(rows: list[dict]) -> None:
+    keys = [("step_from", "{}"), ("commit", "{}"), ("runout_steps", "{:,}"), ("runout_dt_s", "{:.4g}"),
+            ("runout_wall_s", "{:,.0f}"), ("runout_reason", "{}"), ("runout_t_s", "{:.3g}"),
+            ("max_displacement_m", "{:.3g}"), ("runout_distance_m", "{:.3g}"), ("front_m", "{:.3g}"),
+            ("displaced_area_m2", "{:.4g}"), ("kinetic_peak_J_m", "{:.4g}"), ("released_gravity_J_m", "{:.4g}"),
+            ("broken_rock", "{:,}"), ("broken_joints", "{:,}"), ("ledger_error_relative", "{:.2g}")]
+    print("| | " + " | ".join(Path(r["run"]).name for r in rows) + " |")
+    print("|---|" + "---|" * len(rows))
+    for k, fmt in keys:
+        print(f"| {k} | " + " | ".join("-" if r.get(k) is None else fmt.format(r[k]) for r in rows) + " |")
+
+
 def describe(r: dict) -> str:
     return (f"KE peak {r['kinetic_peak_J_m']:.4g} J/m, at the end {r['kinetic_end_J_m']:.4g}; {r['broken_in_runout']} "
             f"broken; max displacement at the end {r['max_displacement_end_m']:.3g} m; ledger error at most "
@@ -210,7 +252,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--measured-fraction", type=float, default=0.8, help="of the measured critical step (0.8)")
     ap.add_argument("--with-control", action="store_true",
                     help="also rerun the runout at the solver's step (else the run's own history is the reference)")
+    ap.add_argument("--at-rest", type=Path, nargs="+", default=None, metavar="RUN",
+                    help="runs made to rest (folders, or summaries in docs/cases/rest): their figures side by side")
     args = ap.parse_args(argv)
+    if args.at_rest is not None:
+        missing = [str(w) for w in args.at_rest if not (w if w.suffix == ".json" else w / "summary.json").is_file()]
+        if missing:
+            ap.error(f"--at-rest: no summary in {', '.join(missing)} (a run that has not ended has none)")
+        rec = {"label": args.label, "at_rest": [figures_at_rest(w) for w in args.at_rest],
+               "command": "python cases/benchmarks/stable_step_margin.py " + shlex.join(argv if argv is not None else sys.argv[1:])}
+        print_at_rest(rec["at_rest"])
+        return save_record(rec)
     if (args.scene is None) == (args.run is None):
         ap.error("give one of --scene ANGLE:SPACING or --run DIR")
     if args.runout_check is not None and (args.run is None or not (args.run / "runout_start.npz").is_file()):
@@ -271,11 +323,16 @@ def main(argv=None) -> dict:
         ref = reference_figures(args.run, rec["runout_check"][0]["t0_s"], args.runout_check)
         rec["runout_check_reference"] = ref
         print(f"  the run itself over the same {args.runout_check:g} s (its history.csv): " + describe(ref))
+    return save_record(rec)
+
+
+def save_record(rec: dict) -> dict:
+    """Merge ``rec`` into ``docs/benchmarks/stable_step_margin.json`` by its label."""
     DOCS.mkdir(parents=True, exist_ok=True)
     path = DOCS / f"{NAME}.json"
     doc = json.loads(path.read_text()) if path.is_file() else {"benchmark": NAME, "records": []}
     doc["machine"] = machine()
-    doc["records"] = [r for r in doc["records"] if r.get("label") != args.label] + [rec]
+    doc["records"] = [r for r in doc["records"] if r.get("label") != rec["label"]] + [rec]
     path.write_text(json.dumps(doc, indent=2))
     print(f"wrote {path}")
     return rec
