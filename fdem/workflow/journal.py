@@ -127,7 +127,11 @@ class RunJournal:
             raise ValueError(f"the run's last stage is {last['name']!r}, which ended {last['reason']!r}: only a "
                              f"{prefix} stage that ran to its cap, or off the model, can be carried on")
         runtime = self.marks.pop(CAPPED_MARK, None)
-        if runtime is None or runtime.get("name") != last["name"]:
+        cap_row_extra = None  # known when the stage kept its runtime (stages.run_stage), else guessed below
+        if runtime is not None and runtime.get("name") == last["name"]:
+            runtime = dict(runtime)
+            cap_row_extra = runtime.pop("cap_row_extra", None)
+        else:
             runtime = {"name": last["name"], "t0": float(last["t_start"]), "dt": float(last["dt"]),
                        "measured_critical": last.get("measured_critical_dt"),
                        "step0": int(sim.state.step) - int(last["steps"]), "x_start": x_start(), "ramp": None,
@@ -137,13 +141,17 @@ class RunJournal:
         self.done.pop()
         self.resume = {**runtime, "n_total": None}  # the steps to the new cap: counted by the stage
         # the row the cap added off the stage's history steps goes: the run's rows, and the peak
-        # kinetic energy between rows, are those of a run never capped
-        # (off the steps: nearer its row before than that row is to the one before it; the
-        # stage's last spacing, as a stage resumed with another step has another spacing)
+        # kinetic energy between rows, are those of a run never capped. The stage says whether its
+        # cap row is one; for a checkpoint that did not keep it, the row is taken as off the steps
+        # when it is nearer its row before than that row is to the one before it (the stage's last
+        # spacing, as a stage resumed with another step has another; a guess a renewed measured
+        # step, whose segments end on rows of their own, can defeat)
         rows = [r for r in sim.history if r.get("stage") == last["name"]]
-        if len(rows) >= 3 and sim.history[-1] is rows[-1]:
-            a, b, c = (int(r["step"]) for r in rows[-3:])
-            if 0 < c - b < b - a:
+        if rows and sim.history[-1] is rows[-1]:
+            if cap_row_extra is None and len(rows) >= 3:
+                a, b, c = (int(r["step"]) for r in rows[-3:])
+                cap_row_extra = 0 < c - b < b - a
+            if cap_row_extra:
                 cap_row = sim.history.pop()
                 sim.kinetic_peak = max(sim.kinetic_peak, float(cap_row.get("kinetic_peak", 0.0)))
         return last

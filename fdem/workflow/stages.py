@@ -700,5 +700,13 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one
-        journal.stage_finished(sim, result.as_dict(), runtime() if reason == "capped" else None)
+        capped = None
+        if reason == "capped":
+            # the row the cap added (at the last step's start) is one the stage never capped does
+            # not write when it lies off the stage's history steps and off a renewal of a measured
+            # step (a segment's end, where that stage writes one too): the carry-on drops it
+            end = sim.state.step
+            capped = {**runtime(), "cap_row_extra": bool((end - 1 - step0) % check_steps != 0
+                                                        and end != status.get("next_probe_step"))}
+        journal.stage_finished(sim, result.as_dict(), capped)
     return result

@@ -704,6 +704,37 @@ def test_renewals_that_find_the_same_step_keep_the_frames_and_the_end(tmp_path, 
     assert ends[0] == ends[1] and frames[0] == frames[1] and len(frames[0]) >= 5
 
 
+def test_a_capped_stage_renewing_its_measured_step_is_carried_on_to_the_rows_of_one_never_capped(tmp_path):
+    """A stage capped while renewing a measured step, carried on to a longer cap
+    (:meth:`fdem.workflow.journal.RunJournal.carry_on`), ends with the rows and the state of the
+    stage given the longer cap at once: the row the cap added is dropped by what the stage
+    recorded of it, not guessed from the spacing of the last rows, which a renewal's own row
+    (a segment's end) upsets (here rows on steps 210, 212 and the cap's 229)."""
+    from fdem.workflow.journal import RunJournal
+
+    T = response_time(undamped_planar_sim().model)
+
+    def stage(cap: float) -> Stage:  # a rule that never holds: the stage runs to its cap
+        return Stage("runout", max_time=cap * T, converge=Convergence(speed=1e-300), dt_fraction=0.8,
+                     step_from="measured", remeasure_every=0.05 * T)
+
+    capped = undamped_planar_sim(out_dir=tmp_path)
+    first = run_stage(capped, stage(0.162), frames=False, journal=RunJournal(tmp_path / "checkpoint.npz"))
+    cap_rows = [int(r["step"]) for r in capped.history if r["stage"] == "runout"]
+    assert first.reason == "capped" and "measured 4 times" in first.detail  # at the start, 0.05, 0.10, 0.15 T
+    assert cap_rows[-3:] == [210, 212, 229]  # a row on the history steps, a renewal's, the cap's
+    carried = undamped_planar_sim()
+    journal = RunJournal.resume_from(carried, tmp_path / "checkpoint.npz")
+    journal.carry_on(carried, "runout", lambda: None)
+    end = run_stage(carried, stage(0.2), frames=False, journal=journal)
+    whole_sim = undamped_planar_sim()
+    whole = run_stage(whole_sim, stage(0.2), frames=False)
+    rows = lambda s: [(int(r["step"]), r["dt"], r["kinetic"]) for r in s.history if r["stage"] == "runout"]  # noqa: E731
+    assert rows(carried) == rows(whole_sim) and 229 not in [r[0] for r in rows(whole_sim)]
+    assert end.steps == whole.steps and end.dt == whole.dt and end.detail == whole.detail
+    assert np.array_equal(carried.state.x, whole_sim.state.x) and np.array_equal(carried.state.v, whole_sim.state.v)
+
+
 @pytest.mark.parametrize("damping", [NO_DAMPING, Damping(mass_proportional=5.0, local=0.1)])
 def test_a_step_that_books_the_ledger_moves_the_nodes_as_one_that_does_not(damping):
     """The fast step (no state energies) and the step of a history row are two loops over the
