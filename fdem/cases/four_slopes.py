@@ -138,22 +138,28 @@ def four_slope_geometry(angle: str = "low", spacing: str | float = "fine", toe_l
 RUN_EXTENTS = {
     "low": {"crest_length": 4 * FOUR_SLOPE_HEIGHT, "toe_length": 6 * FOUR_SLOPE_HEIGHT,
             "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": None},
-    "high": {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
+    "high": {"crest_length": 4 * FOUR_SLOPE_HEIGHT, "toe_length": 6 * FOUR_SLOPE_HEIGHT,
              "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": 5.0},
 }
 """The extents [m] a run of the case uses unless told (``docs/cases.md`` A, "Boundaries"), chosen
-so that the boundaries take no part. Low angle: the persistent joint through the toe rises at 15
-deg and meets the crest 56 m behind the toe; with a crest of 2 H it met the right-hand roller
-instead, and the whole package above it slid off that roller (1.0 m, 2026-11-24), so the crest is
-4 H; the debris ran 44 m and off the end of a 3 H floor, so the floor is 6 H. High angle: joints
-dipping into the model break beside the right-hand roller already at F = 1 (23 elements at
-1.0 m), and 5 m bands of intact rock along the sides stop it there; in a model with a crest of
-4 H one joint 7-13 m inside the band still breaks at F = 1, so the high-angle treatment is not
-settled (``docs/cases.md`` A, "Boundaries"). Part of it is the start, not the boundary: in the
-static start's uniaxial-strain state the high-angle persistent joints (65 deg) are beyond
-Mohr-Coulomb at F = 1 below 15 m of cover (:func:`fdem.reference.level_ground.slip_depth`), so
-under the crest's 30 m they slip at F = 1 wherever they are. :func:`four_slope_geometry`
-keeps the smaller extents of its own defaults (the verification tests and benchmarks use them)."""
+so that the boundaries take no part: a wider model gives the same factor of safety within the
+bisection's tolerance. Low angle: the persistent joint through the toe rises at 15 deg and meets
+the crest 56 m behind the toe; with a crest of 2 H it met the right-hand roller instead, and the
+whole package above it slid off that roller (1.0 m, 2026-11-24), so the crest is 4 H (0.5 m:
+1.216 on 4 H, 1.206 on 6 H); the debris ran 44 m and off the end of a 3 H floor, so the floor is
+6 H. High angle: joints dipping into the model break beside the right-hand roller already at
+F = 1 (23 elements at 1.0 m), and 5 m bands of intact rock along the sides stop it there. The
+first failing trial is a creep of the whole jointed ground behind the face, as far back as the
+joints reach, so a longer crest holds it better: bisected at 1.0 m with elastic bands, the fine
+slope gives 1.680, 1.820 and 1.801 on crests of 2, 4 and 6 H, the coarse slope 1.328, 1.578 and
+1.547 (2026-11-29), so the crest is 4 H; the coarse debris reached the end of a 3 H floor (a
+45.3 m front), so the floor is 6 H, as the low angle's. Part of the breakage at F = 1 is the
+start, not the boundary: in the static start's uniaxial-strain state the high-angle persistent
+joints (65 deg) are beyond Mohr-Coulomb at F = 1 below 15 m of cover
+(:func:`fdem.reference.level_ground.slip_depth`), so under the crest they slip at F = 1 wherever
+they are. The runs begun before 2026-11-29 on the high angle's crest of 2 H and floor of 3 H keep
+them (their ``run.json`` names them). :func:`four_slope_geometry` keeps the smaller extents of its
+own defaults (the verification tests and benchmarks use them)."""
 
 EXTENTS_BEFORE_PINNING = {"crest_length": 2 * FOUR_SLOPE_HEIGHT, "toe_length": 3 * FOUR_SLOPE_HEIGHT,
                           "base_depth": FOUR_SLOPE_HEIGHT, "boundary_band": None}

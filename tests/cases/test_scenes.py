@@ -190,7 +190,7 @@ def test_four_slopes_writes_a_scene_that_checks(tmp_path):
     assert scene["joints"][0]["dip"] == 115.0 and scene["joints"][0]["spacing"] == 5.0
     assert scene["workflow"]["fos"] == [1.0, 2.0, 0.1]
     assert scene["cracks"][1]["k_t"] == 917e9  # the paper's tangential stiffness, not a penalty
-    assert (scene["slope"]["crest_length"], scene["slope"]["toe_length"], scene["slope"]["base_depth"]) == (30, 45, 15)
+    assert (scene["slope"]["crest_length"], scene["slope"]["toe_length"], scene["slope"]["base_depth"]) == (60, 90, 15)
 
 
 def test_four_slopes_wider_model_keeps_the_slope_and_its_joints_and_refuses_a_bad_extent(tmp_path, capsys):
@@ -298,7 +298,8 @@ def test_four_slopes_side_bands_go_into_the_scene_file(tmp_path):
     four_slopes.main(["--angle", "high", "--boundary-band", "5", "--write-scene", str(path)])
     scene = read_scene(path)
     assert scene["joints"][0]["side_band"] == 5.0 and scene["joints"][0]["kind"] == "brick"
-    case = four_slopes.four_slope_geometry("high", "fine", boundary_band=5.0)
+    extents = {k: v for k, v in four_slopes.RUN_EXTENTS["high"].items() if k != "boundary_band"}  # the run's
+    case = four_slopes.four_slope_geometry("high", "fine", boundary_band=5.0, **extents)
     built = scene_geometry(scene)
     bounds = case.bodies[0].bounds
     a = case.joint_sets[0].raw_segments(bounds)
