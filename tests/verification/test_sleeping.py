@@ -126,12 +126,19 @@ def test_ledger_closes_with_sleeping(drops):
 
 
 def test_slide_is_within_the_seed_spread(settled):
-    """The block lands moving sideways and slides to rest on the bed: its travel with sleeping
-    lies within the spread of runs without sleeping whose velocities were nudged by 1e-6 m/s."""
-    free = [drop(settled, False, vx=1.0, seed=k, t_end=0.6)["block_disp"][0] for k in (None, 0, 1)]
-    on = drop(settled, True, vx=1.0, t_end=0.6)
-    assert on["asleep"].max() > 0.5
-    assert min(free) <= on["block_disp"][0] <= max(free)
+    """The block lands moving sideways and slides to rest on the bed: over runs whose velocities
+    were nudged by 1e-6 m/s, its travel with sleeping has the mean of the runs without (Welch's
+    statistic under 3; 0.27 on 2026-11-29), within 1 % of it. The distributions are compared, not one run with
+    the range of a few: a single run lies outside the range of three others of the same
+    distribution half the time (the unnudged run with sleeping is the largest of its own ten,
+    z = 1.8 against those without, 2026-11-29)."""
+    seeds = (None, 0, 1, 2, 3, 4)
+    runs = {sleeping: [drop(settled, sleeping, vx=1.0, seed=k, t_end=0.6) for k in seeds] for sleeping in (False, True)}
+    assert all(r["asleep"].max() > 0.5 for r in runs[True])
+    free, on = (np.array([r["block_disp"][0] for r in runs[k]]) for k in (False, True))
+    spread = np.sqrt((free.var(ddof=1) + on.var(ddof=1)) / len(seeds))
+    assert abs(on.mean() - free.mean()) < 3 * spread
+    assert abs(on.mean() / free.mean() - 1) < 0.01
 
 
 def test_damped_stages_are_untouched(settled):
