@@ -33,7 +33,7 @@ Prints and saves ``docs/benchmarks/stable_step_margin.json`` (records merged by 
     NUMBA_NUM_THREADS=1 python cases/benchmarks/stable_step_margin.py --run runs/s40/high_coarse_1.0_offset0_local \\
         --label high_coarse_1.0_offset0_at_rest --tangential
     python cases/benchmarks/stable_step_margin.py --label low_coarse_1.0_offset0_to_rest --at-rest \\
-        runs/s43/low_coarse_1.0_offset0_measured runs/s43/low_coarse_1.0_offset0_bound \\
+        runs/s44/twin_measured runs/s44/twin_bound \\
         docs/cases/rest/low_coarse_1.0_crest60_toe90_offset0.json
 """
 from __future__ import annotations

@@ -496,10 +496,16 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     # a measured step is the stage's alone: whatever ends the stage, the next one steps from the
     # bounds (critical_dt() of a cost estimate or the guard included)
     sim.measured_critical = None
-    check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
-    output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
-    if not frames:
-        output_steps = 2 ** 62
+
+    def spacings(step: float) -> tuple[int, int]:
+        """Steps between the rule checks (history rows) and between frames at time step ``step``
+        [s]: ``check_interval`` (default T/40) and ``output_interval`` (default a quarter of the
+        stage), in the scaled model's time; no frames when ``frames`` is off."""
+        check = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / step)))
+        output = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / step)))
+        return check, (output if frames else 2 ** 62)
+
+    check_steps, output_steps = spacings(dt)
     if kind == "resume":
         t0, step0 = float(saved["t0"]), int(saved["step0"])
         n_total = None if saved.get("n_total") is None else int(saved["n_total"])
@@ -657,9 +663,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
                 sim.measured_critical = measured
                 dt = sim.dt = sim._choose_dt()
                 n_total = sim.state.step - step0 + sim.steps_to(t0 + length)
-                check_steps = max(1, int(round(stretch * (stage.check_interval or T / 40.0) / dt)))
-                if frames:
-                    output_steps = max(1, int(round(stretch * (stage.output_interval or length / stretch / 4.0) / dt)))
+                check_steps, output_steps = spacings(dt)
                 _schedule_probe(sim, stage, status)
             finally:
                 STOP.running -= 1
@@ -702,9 +706,9 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one
         capped = None
         if reason == "capped":
-            # the row the cap added (at the last step's start) is one the stage never capped does
-            # not write when it lies off the stage's history steps and off a renewal of a measured
-            # step (a segment's end, where that stage writes one too): the carry-on drops it
+            # the cap writes a row at its last step; a stage given a longer cap writes none there
+            # unless that step is on its history steps or ends a segment of a renewed measured
+            # step: otherwise the carry-on drops the row (fdem.workflow.journal.RunJournal.carry_on)
             end = sim.state.step
             capped = {**runtime(), "cap_row_extra": bool((end - 1 - step0) % check_steps != 0
                                                         and end != status.get("next_probe_step"))}
