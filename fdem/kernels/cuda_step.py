@@ -33,7 +33,7 @@ from numba import cuda, float64, int64
 from fdem.kernels.contact_pairs import MAX_VERT, N_COL, N_IWORK, N_WORK, _gather_one, _pair_range
 from fdem.kernels.contact_search import triangle_moved2
 from fdem.kernels.cracks import element_update
-from fdem.kernels.stepping import LEDGER_FIELDS, triangle_step
+from fdem.kernels.stepping import LEDGER_FIELDS, damping_factors, triangle_step
 
 __all__ = ["THREADS", "N_STEP_SUMS", "N_CONTACT_SUMS", "blocks_for", "step_kernel", "crack_kernel",
            "contact_kernel", "gather_kernel", "moved_kernel", "zero_kernel"]
@@ -86,8 +86,7 @@ def step_kernel(x, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_pres
     for k in range(N_STEP_SUMS):
         shared[tid, k] = 0.0
     if t < tc.shape[0]:
-        c_keep = 1.0 - 0.5 * alpha * dt
-        c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
+        c_keep, c_div = damping_factors(alpha, dt)
         damped = alpha != 0.0 or local != 0.0
         s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt,
                           alpha, c_keep, c_div, local, damped, use_viscous, ledger)

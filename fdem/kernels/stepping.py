@@ -123,43 +123,33 @@ def constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, 
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
-                 f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger):
-    """Central-difference update of node ``i`` given the force ``(fx, fy)`` of its triangle(s).
+def damping_factors(alpha, dt):
+    """``(c_keep, c_div) = (1 - alpha dt/2, 1 / (1 + alpha dt/2))``: the factors of the
+    central-difference update with mass-proportional damping ``alpha`` [1/s] (:func:`damped_velocity`)."""
+    h = 0.5 * alpha * dt
+    return 1.0 - h, 1.0 / (1.0 + h)
 
-    ``gmass`` is the node's gravitational mass, ``mass`` (``1 / inv_mass``) its inertial mass:
-    the same but in a density-scaled stage (:mod:`fdem.solve.density_scaling`). Adds gravity ``gmass g``, the interaction force (if ``use_int``) and the external load (if
-    ``use_ext``), applies damping (if ``damped``) and the prescribed velocities of ``flags``,
-    writes ``v[i]`` and ``x[i]``. Returns ``(v_new_x, v_new_y, kinetic, gravity_moment,
-    external_moment, damping_early, damping_late, reaction_early, reaction_late,
-    interaction_early, interaction_late)`` (halves already multiplied by ``dt/2``); the
-    moments are computed only if ``ledger``, the kinetic energy every step (a few flops: it
-    lets the solver follow the kinetic energy's peak step by step).
+
+@njit(fastmath=FASTMATH, cache=True, inline="always")
+def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, ex, ey, dt, damped, alpha, c_keep, c_div,
+              local, flags, v_prescribed):
+    """The central-difference update of node ``i``: the one law of every step kernel.
+
+    ``v_{n+1/2} = v_{n-1/2} + dt (f + m_g g + f_ext) / m`` (damped by :func:`damped_velocity` if
+    ``damped``), then the supports and ``x_{n+1} = x_n + dt v_{n+1/2}``
+    (:func:`constrain_and_move`). ``(fx, fy)`` is the node's internal force with the interaction
+    force already added [N/m], ``(ex, ey)`` the external load, ``gmass`` the gravitational and
+    ``mass`` (``1 / inv_mass``) the inertial mass (different in a density-scaled stage), ``(px,
+    py) = x[i]`` (the caller has it in registers). The forces are summed in one order (internal
+    and interaction, then gravity, then external), so every kernel moves a node bit for bit alike.
+    Returns ``(v_new_x, v_new_y, v_old_x, v_old_y, damping_force_x, damping_force_y,
+    reaction_early, reaction_late)``.
     """
-    px, py = x[i, 0], x[i, 1]
     ux, uy = v[i, 0], v[i, 1]
-    h = 0.5 * dt
-    ie = 0.0
-    il = 0.0
-    if use_int:
-        ix = f_int[i, 0]
-        iy = f_int[i, 1]
-        fx += ix
-        fy += iy
-    # gravity after the interaction force, as advance_node_elastic adds them: a step that books
-    # the ledger moves the nodes bit for bit as the fast path's (a run's state does not depend
-    # on where its history rows fall)
     fx += gmass * gx
     fy += gmass * gy
-    ex = 0.0
-    ey = 0.0
-    if use_ext:
-        ex = f_ext[i, 0]
-        ey = f_ext[i, 1]
-        fx += ex
-        fy += ey
-    de = 0.0
-    dl = 0.0
+    fx += ex
+    fy += ey
     if damped:
         nx, gdx = damped_velocity(ux, fx, mass, inv_mass, dt, alpha, c_keep, c_div, local)
         ny, gdy = damped_velocity(uy, fy, mass, inv_mass, dt, alpha, c_keep, c_div, local)
@@ -170,9 +160,43 @@ def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_ke
         gdy = 0.0
     nx, ny, gdx, gdy, re, rl = constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
                                                   flags, v_prescribed)
+    return nx, ny, ux, uy, gdx, gdy, re, rl
+
+
+@njit(fastmath=FASTMATH, cache=True, inline="always")
+def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
+                 f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger):
+    """:func:`move_node` with the energies of the ledger: node ``i`` given the force ``(fx, fy)``
+    of its triangle(s), plus the interaction force (if ``use_int``) and the external load (if
+    ``use_ext``). Returns ``(v_new_x, v_new_y, kinetic, gravity_moment, external_moment,
+    damping_early, damping_late, reaction_early, reaction_late, interaction_early,
+    interaction_late)`` (halves already multiplied by ``dt/2``); the moments are computed only
+    if ``ledger``, the kinetic energy every step (a few flops: it lets the solver follow the
+    kinetic energy's peak step by step).
+    """
+    px, py = x[i, 0], x[i, 1]
+    h = 0.5 * dt
+    ix = 0.0
+    iy = 0.0
+    if use_int:
+        ix = f_int[i, 0]
+        iy = f_int[i, 1]
+        fx += ix
+        fy += iy
+    ex = 0.0
+    ey = 0.0
+    if use_ext:
+        ex = f_ext[i, 0]
+        ey = f_ext[i, 1]
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, ex, ey,
+                                                 dt, damped, alpha, c_keep, c_div, local, flags, v_prescribed)
+    de = 0.0
+    dl = 0.0
     if damped:
         de = -h * (gdx * ux + gdy * uy)
         dl = -h * (gdx * nx + gdy * ny)
+    ie = 0.0
+    il = 0.0
     if use_int:
         ie = h * (ix * ux + iy * uy)
         il = h * (ix * nx + iy * ny)
@@ -279,8 +303,7 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
     Returns the sums named in :data:`LEDGER_FIELDS` (state energies 0 unless ``ledger``; sums
     over the stepped triangles only).
     """
-    c_keep = 1.0 - 0.5 * alpha * dt
-    c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
+    c_keep, c_div = damping_factors(alpha, dt)
     damped = alpha != 0.0 or local != 0.0
     n_tri = tc.shape[0]
     nb = partial.shape[0]
@@ -333,31 +356,23 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
 def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damping, flags, v_prescribed):
-    """Lean :func:`advance_node`: gravity, optional damping (``damping = (alpha, local)`` or
-    ``None``) and constraints; no external loads, no state energies. ``(px, py) = x[i]``,
-    passed in because the caller has it in registers; ``gmass`` the gravitational and ``mass``
-    the inertial mass (different in a density-scaled stage).
+    """:func:`move_node` for the fast path: gravity, optional damping (``damping = (alpha,
+    local)`` or ``None``) and supports; no external loads, no state energies. ``(fx, fy)``
+    includes the interaction force.
 
     Returns ``(reaction_early, reaction_late, v_new_x, v_new_y, v_old_x, v_old_y,
     damping_early, damping_late)`` [J/m, m/s].
     """
-    ux, uy = v[i, 0], v[i, 1]
-    fx += gmass * gx
-    fy += gmass * gy
     h = 0.5 * dt
+    alpha = 0.0
+    local = 0.0
     if damping is not None:
         alpha = damping[0]
-        c_keep = 1.0 - h * alpha
-        c_div = 1.0 / (1.0 + h * alpha)
-        nx, gdx = damped_velocity(ux, fx, mass, inv_mass, dt, alpha, c_keep, c_div, damping[1])
-        ny, gdy = damped_velocity(uy, fy, mass, inv_mass, dt, alpha, c_keep, c_div, damping[1])
-    else:
-        nx = ux + dt * inv_mass * fx
-        ny = uy + dt * inv_mass * fy
-        gdx = 0.0
-        gdy = 0.0
-    nx, ny, gdx, gdy, re, rl = constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
-                                                  flags, v_prescribed)
+        local = damping[1]
+    c_keep, c_div = damping_factors(alpha, dt)
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, 0.0, 0.0,
+                                                 dt, damping is not None, alpha, c_keep, c_div, local, flags,
+                                                 v_prescribed)
     return re, rl, nx, ny, ux, uy, -h * (gdx * ux + gdy * uy), -h * (gdx * nx + gdy * ny)
 
 
@@ -507,8 +522,7 @@ def node_pass(x, v, mass, node_corner_ptr, node_corners, corner_force,
     node ``i`` (CSR). Returns ``(kinetic, gravity_moment, external_moment, damping_early,
     damping_late, reaction_early, reaction_late, interaction_early, interaction_late)``.
     """
-    c_keep = 1.0 - 0.5 * alpha * dt
-    c_div = 1.0 / (1.0 + 0.5 * alpha * dt)
+    c_keep, c_div = damping_factors(alpha, dt)
     damped = alpha != 0.0 or local != 0.0
     s2 = 0.0
     s3 = 0.0
