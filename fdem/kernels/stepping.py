@@ -131,14 +131,14 @@ def damping_factors(alpha, dt):
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, ex, ey, dt, damped, alpha, c_keep, c_div,
-              local, flags, v_prescribed):
+def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey, dt, damped, alpha, c_keep,
+              c_div, local, flags, v_prescribed):
     """The central-difference update of node ``i``: the one law of every step kernel.
 
     ``v_{n+1/2} = v_{n-1/2} + dt (f + m_g g + f_ext) / m`` (damped by :func:`damped_velocity` if
     ``damped``), then the supports and ``x_{n+1} = x_n + dt v_{n+1/2}``
     (:func:`constrain_and_move`). ``(fx, fy)`` is the node's internal force with the interaction
-    force already added [N/m], ``(ex, ey)`` the external load, ``gmass`` the gravitational and
+    force already added [N/m], ``(ex, ey)`` the external load (added if ``use_ext``), ``gmass`` the gravitational and
     ``mass`` (``1 / inv_mass``) the inertial mass (different in a density-scaled stage), ``(px,
     py) = x[i]`` (the caller has it in registers). The forces are summed in one order (internal
     and interaction, then gravity, then external), so every kernel moves a node bit for bit alike.
@@ -148,8 +148,9 @@ def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, ex, ey, dt
     ux, uy = v[i, 0], v[i, 1]
     fx += gmass * gx
     fy += gmass * gy
-    fx += ex
-    fy += ey
+    if use_ext:
+        fx += ex
+        fy += ey
     if damped:
         nx, gdx = damped_velocity(ux, fx, mass, inv_mass, dt, alpha, c_keep, c_div, local)
         ny, gdy = damped_velocity(uy, fy, mass, inv_mass, dt, alpha, c_keep, c_div, local)
@@ -188,7 +189,7 @@ def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_ke
     if use_ext:
         ex = f_ext[i, 0]
         ey = f_ext[i, 1]
-    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, ex, ey,
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey,
                                                  dt, damped, alpha, c_keep, c_div, local, flags, v_prescribed)
     de = 0.0
     dl = 0.0
@@ -355,24 +356,18 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damping, flags, v_prescribed):
-    """:func:`move_node` for the fast path: gravity, optional damping (``damping = (alpha,
-    local)`` or ``None``) and supports; no external loads, no state energies. ``(fx, fy)``
-    includes the interaction force.
+def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damped, alpha, c_keep, c_div,
+                         local, flags, v_prescribed):
+    """:func:`move_node` for the fast path: gravity, optional damping (the factors of
+    :func:`damping_factors`, computed once a step by the caller) and supports; no external
+    loads, no state energies. ``(fx, fy)`` includes the interaction force.
 
     Returns ``(reaction_early, reaction_late, v_new_x, v_new_y, v_old_x, v_old_y,
     damping_early, damping_late)`` [J/m, m/s].
     """
     h = 0.5 * dt
-    alpha = 0.0
-    local = 0.0
-    if damping is not None:
-        alpha = damping[0]
-        local = damping[1]
-    c_keep, c_div = damping_factors(alpha, dt)
-    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, 0.0, 0.0,
-                                                 dt, damping is not None, alpha, c_keep, c_div, local, flags,
-                                                 v_prescribed)
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, False, 0.0, 0.0,
+                                                 dt, damped, alpha, c_keep, c_div, local, flags, v_prescribed)
     return re, rl, nx, ny, ux, uy, -h * (gdx * ux + gdy * uy), -h * (gdx * nx + gdy * ny)
 
 
@@ -391,6 +386,13 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
     n_tri = tc.shape[0]
     nb = partial.shape[0]
     h = 0.5 * dt
+    alpha = 0.0
+    local = 0.0
+    if damping is not None:
+        alpha = damping[0]
+        local = damping[1]
+    damped = damping is not None
+    c_keep, c_div = damping_factors(alpha, dt)
     for blk in prange(nb):
         r_e = 0.0
         r_l = 0.0
@@ -437,9 +439,12 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
             else:
                 ma, mb, mc = inertia[i, 0], inertia[i + 1, 0], inertia[i + 2, 0]
                 ia, ib, ic = inertia[i, 1], inertia[i + 1, 1], inertia[i + 2, 1]
-            a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damping, flags, v_prescribed)
-            b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damping, flags, v_prescribed)
-            c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damping, flags, v_prescribed)
+            a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damped, alpha, c_keep, c_div,
+                                     local, flags, v_prescribed)
+            b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damped, alpha, c_keep, c_div,
+                                     local, flags, v_prescribed)
+            c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damped, alpha, c_keep, c_div,
+                                     local, flags, v_prescribed)
             r_e += a[0] + b[0] + c[0]
             r_l += a[1] + b[1] + c[1]
             kin += 0.5 * (ma * (a[2] * a[4] + a[3] * a[5]) + mb * (b[2] * b[4] + b[3] * b[5])
