@@ -294,6 +294,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
         wf = {"reduction": workflow.reduction, "fos": list(workflow.fos) if workflow.fos else None,
               "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction,
               **({"runout_step": workflow.runout_step} if workflow.runout_step != "bound" else {}),
+              **({"equilibrium_ratio": workflow.equilibrium_ratio} if workflow.equilibrium_ratio != 1e-4 else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -377,6 +378,11 @@ def main(argv=None) -> dict:
                              "'cohesive and frictional strength')")
     parser.add_argument("--fos", type=float, nargs=3, metavar=("LOWER", "UPPER", "TOL"), default=None,
                         help="search the factor of safety in [LOWER, UPPER] to TOL first")
+    parser.add_argument("--equilibrium-ratio", type=float, default=1e-4, metavar="RATIO",
+                        help="unbalanced-force ratio that counts as equilibrium in every damped stage and "
+                             "factor-of-safety trial (default 1e-4; each model raises it to 10 times its round-off "
+                             "floor, which grows as the mesh refines: give the finest model's limit to judge every "
+                             "size of a convergence study by one rule, docs/cases.md A)")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
     parser.add_argument("--runout-dt-fraction", type=float, default=0.8, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
@@ -446,7 +452,7 @@ def main(argv=None) -> dict:
     try:  # the workflow's settings are checked now, not after hours of stages
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
                                  runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
-                                 runout_step=args.runout_step,
+                                 runout_step=args.runout_step, equilibrium_ratio=args.equilibrium_ratio,
                                  local_fall_area=args.local_fall_area or None)
     except ValueError as err:
         parser.error(str(err))

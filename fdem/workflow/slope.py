@@ -71,16 +71,17 @@ class SlopeWorkflow:
     reduction_rate : fall of the strength ``1/F`` per second in ``"rate"`` mode (paper: 5 /s)
     final_strength : the strength ``1/F`` the rate mode stops at (paper: 0.3)
     fos : ``(lower, upper, tol)`` to search the factor of safety first, or ``None``
-    equilibrium_ratio : unbalanced-force ratio that counts as equilibrium (default 1e-4)
-    step_time : cap of each damped stage (default ``5 T``, as the factor-of-safety trials: with
+    equilibrium_ratio : unbalanced-force ratio that counts as equilibrium (default 1e-4), in the
+        equilibrium stage, the reduction steps and the factor-of-safety trials alike
+    step_time : cap of each damped stage, the factor-of-safety trials included (default ``5 T``: with
         the fundamental-mode damping a stable slope converges within about 1.5 T). The
         equilibrium stage at ``F = 1`` gets twice that: it is where the elastic start's
         over-strength joints slip into place, and a slope that cannot stand at ``F = 1`` ends
         the analysis. The high-angle fine four-slope scene at 1.0 m needs it: joints slipping
         beside its right-hand boundary break 23 elements, and its ratio falls from 0.05 at
         0.6 s to 1.15e-4 at the 5 T cap (2.06 s), still falling about 2.5x per 0.2 s
-    fail_displacement : displacement since a stage began that counts as failure [m]
-        (default 1 % of the model height)
+    fail_displacement : displacement since a stage began that counts as failure [m], in every
+        damped stage and trial (default 1 % of the model height)
     runout_time : cap of the runout stage (default ``max(20 T, 4 sqrt(2 H / g))``, four times
         the free-fall time over the model height ``H``)
     rest_kinetic_ratio : the runout ends when the kinetic energy stays below this fraction of
@@ -302,7 +303,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         summary["outcome"] = "failed"
         summary["failed_at_factor"] = 1.0
     elif wf.trigger == "gravity":
-        _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal)
+        _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, out_dir, journal)
         return
     else:
         if wf.fos is not None:
@@ -314,8 +315,9 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             # and reported; the schedule after it does not depend on it and goes on.
             def search():
                 try:
-                    return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir,
-                                            journal=journal).as_dict()
+                    return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
+                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail)
+                                            ).as_dict()
                 except BracketError as err:
                     return beyond_bracket(err, lower, upper)
 
@@ -520,7 +522,7 @@ def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float, journal=N
                          f"off the face, not the slope")
 
 
-def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) -> None:
+def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, out_dir, journal) -> None:
     """The gravity-increase workflow after equilibrium: the critical gravity factor ``k`` by
     bisection on ``wf.fos`` (:class:`fdem.workflow.fos.GravityIncrease`), then, at the bracket's
     failing factor, a damped ``onset`` stage (the failing trial's: it ends when a node has moved
@@ -530,11 +532,12 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) 
     import dataclasses
 
     lower, upper, tol = wf.fos
+    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail)
 
     def search():
         try:
             return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, trigger=GravityIncrease(),
-                                    out_dir=out_dir, journal=journal).as_dict()
+                                    out_dir=out_dir, journal=journal, trial=trial).as_dict()
         except BracketError as err:
             return beyond_bracket(err, lower, upper)
 
@@ -547,7 +550,7 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, out_dir, journal) 
         return
     summary["failed_at_factor"] = k
     summary["outcome"] = "failed"
-    onset = dataclasses.replace(default_trial_stage(sim), name="onset", gravity_factor=k)
+    onset = dataclasses.replace(trial, name="onset", gravity_factor=k)
     record(run_stage(sim, onset, journal=journal))
     slide = dataclasses.replace(runout_stage(wf, T, height, k * g), gravity_factor=k)
     record(run_stage(sim, slide, journal=journal))

@@ -229,6 +229,23 @@ def test_a_search_alone_ends_after_its_bracket_with_the_limit_equilibrium_factor
     assert np.abs(sim.state.x - sim.model.topology.x0[sim.model.topology.triangles].reshape(-1, 2)).max() < 1e-3
 
 
+def test_the_search_judges_its_trials_by_the_rule_of_the_workflow():
+    """The workflow's equilibrium ratio, stage cap and failure displacement are its trials' too:
+    a slope the default rule fails at F = 1.8 (its factor is 1.4, the test above) is stable there
+    when its workflow counts a ratio of 0.5 as equilibrium, so the search stops at its upper end
+    with the bracket open above it. Before, the trials kept 1e-4 and 5 T whatever the workflow
+    said, and a convergence study could not hold its rule fixed across element sizes."""
+    from fdem.workflow.fos import default_trial_stage
+
+    s = planar_slope_scene()
+    sim = s.sim
+    trial = default_trial_stage(sim, 2e-4, 3.0, Failure(displacement=0.05))
+    assert (trial.converge.unbalanced_ratio, trial.max_time, trial.fail.displacement) == (2e-4, 3.0, 0.05)
+    summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_ratio=0.5))
+    assert summary["fos"]["fos"] is None and summary["fos"]["bracket"] == [1.8, None], summary["fos"]
+    assert "stable" in summary["fos"]["error"]
+
+
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
     """Planar block, c = 20 kPa, phi = 30 deg on a 35 deg plane: limit equilibrium fails when
     gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
