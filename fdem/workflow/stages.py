@@ -77,8 +77,13 @@ class Convergence:
         sits at 1.66e-4, above the usual 1e-4, and a stage with the bare limit never converges
         (it ran 1.27 s, 169,740 steps, at rest from 0.45 s on). The ratio at rest measured 1.3-2
         (a column), 2.6 (size 1.0) and 5 (size 0.18) times the floor estimate; 10 keeps a
-        margin. At sizes 0.5 and coarser the raised limit is at most the usual 1e-4; at 0.18 it
-        is 3.3e-4 (``docs/benchmarks.md``, "Equilibrium stage at scale").
+        margin. On the four-slope scene with a crest of 2 H the raised limit is at most the usual
+        1e-4 at sizes 0.5 and coarser, and 3.3e-4 at 0.18 (``docs/benchmarks.md``, "Equilibrium
+        stage at scale"); with the run extents (x up to 165 m, where float64 positions are half
+        as fine) it is 1.83e-4 at 0.5 and 2.8e-4 at 0.35. The limit so moves with the element
+        size, and a factor of safety judged at each size's own limit drifts with it: a
+        convergence study gives every size the finest model's limit
+        (:class:`fdem.workflow.slope.SlopeWorkflow` ``equilibrium_ratio``, ``docs/cases.md`` A).
     """
 
     unbalanced_ratio: float | None = 1e-4
