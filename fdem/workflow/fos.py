@@ -224,17 +224,18 @@ def fundamental_damping(sim: Simulation) -> Damping:
 
 
 def default_trial_stage(sim: Simulation, equilibrium_ratio: float = 1e-4, max_time: float | None = None,
-                        fail: Failure | None = None) -> Stage:
+                        fail: Failure | None = None, damping: Damping | None = None) -> Stage:
     """The damped trial of a factor-of-safety search: :func:`fundamental_damping`, converged
     when the unbalanced-force ratio falls below ``equilibrium_ratio`` (default 1e-4), failed by
     ``fail`` (default: a node moves 1 % of the model height), capped at ``max_time`` (default 5
     response times; non-convergence counts as failure). The slope workflow passes its own
     ``equilibrium_ratio``, ``step_time`` and ``fail_displacement``
-    (:class:`fdem.workflow.slope.SlopeWorkflow`), so that its trials and its reduction steps
-    judge a slope by one rule."""
+    (:class:`fdem.workflow.slope.SlopeWorkflow`), and the damping of its reduction steps
+    (``damping``, default :func:`fundamental_damping`), so that its trials and its reduction
+    steps judge a slope by one rule."""
     return Stage("trial", max_time=max_time or 5.0 * response_time(sim.model),
                  converge=Convergence(unbalanced_ratio=equilibrium_ratio), fail=fail or Failure(),
-                 damping=fundamental_damping(sim))
+                 damping=damping if damping is not None else fundamental_damping(sim))
 
 
 def _trial_stage_at(trial: Stage, factor: float) -> Stage:

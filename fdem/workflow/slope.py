@@ -303,7 +303,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         summary["outcome"] = "failed"
         summary["failed_at_factor"] = 1.0
     elif wf.trigger == "gravity":
-        _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, out_dir, journal)
+        _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, damped, out_dir, journal)
         return
     else:
         if wf.fos is not None:
@@ -316,7 +316,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             def search():
                 try:
                     return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
-                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail)
+                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped)
                                             ).as_dict()
                 except BracketError as err:
                     return beyond_bracket(err, lower, upper)
@@ -522,7 +522,7 @@ def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float, journal=N
                          f"off the face, not the slope")
 
 
-def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, out_dir, journal) -> None:
+def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, damped, out_dir, journal) -> None:
     """The gravity-increase workflow after equilibrium: the critical gravity factor ``k`` by
     bisection on ``wf.fos`` (:class:`fdem.workflow.fos.GravityIncrease`), then, at the bracket's
     failing factor, a damped ``onset`` stage (the failing trial's: it ends when a node has moved
@@ -532,7 +532,7 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, o
     import dataclasses
 
     lower, upper, tol = wf.fos
-    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail)
+    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped)
 
     def search():
         try:
