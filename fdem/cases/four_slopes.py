@@ -295,6 +295,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
               "runout_time": workflow.runout_time, "runout_dt_fraction": workflow.runout_dt_fraction,
               **({"runout_step": workflow.runout_step} if workflow.runout_step != "bound" else {}),
               **({"equilibrium_ratio": workflow.equilibrium_ratio} if workflow.equilibrium_ratio != 1e-4 else {}),
+              **({"equilibrium_hold": workflow.equilibrium_hold} if workflow.equilibrium_hold else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -383,6 +384,10 @@ def main(argv=None) -> dict:
                              "factor-of-safety trial (default 1e-4; each model raises it to 10 times its round-off "
                              "floor, which grows as the mesh refines: give the finest model's limit to judge every "
                              "size of a convergence study by one rule, docs/cases.md A)")
+    parser.add_argument("--equilibrium-hold", type=float, default=0.0, metavar="T",
+                        help="response times the ratio must keep below its limit before a factor-of-safety trial "
+                             "or reduction step counts as converged (default 0: the first check; a slope near its "
+                             "factor creeps with its ratio dipping below a raised limit and rising again)")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
     parser.add_argument("--runout-dt-fraction", type=float, default=0.8, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
@@ -453,6 +458,7 @@ def main(argv=None) -> dict:
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
                                  runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
                                  runout_step=args.runout_step, equilibrium_ratio=args.equilibrium_ratio,
+                                 equilibrium_hold=args.equilibrium_hold,
                                  local_fall_area=args.local_fall_area or None)
     except ValueError as err:
         parser.error(str(err))

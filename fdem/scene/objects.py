@@ -114,7 +114,8 @@ def workflow(s: dict):
     from fdem.workflow.slope import SlopeWorkflow
 
     w = s["workflow"]
-    fields = {k: w[k] for k in ("reduction", "reduction_rate", "final_strength", "equilibrium_ratio", "step_time",
+    fields = {k: w[k] for k in ("reduction", "reduction_rate", "final_strength", "equilibrium_ratio",
+                                "equilibrium_hold", "step_time",
                                 "fail_displacement", "runout_time", "rest_kinetic_ratio", "runout_dt_fraction",
                                 "local_fall_area", "runout_step")}
     if w["factors"] is not None:

@@ -177,6 +177,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                              "gravity-factor bracket)", length=3),
         "equilibrium_ratio": _f("unbalanced-force ratio that counts as equilibrium [-]", 1e-4, low=0.0, high=1.0,
                                 open_low=True, open_high=True),
+        "equilibrium_hold": _f("response times the ratio must keep below equilibrium_ratio before a trial or "
+                               "reduction step counts as converged [-] (0: the first check)", 0.0, low=0.0),
         "step_time": _f("cap of each damped stage [s] (default 5 response times)", **POSITIVE),
         "fail_displacement": _f("displacement that counts as failure [m] (default 1 % of the height)", **POSITIVE),
         "runout_time": _f("cap of the runout stage [s] (default from the height)", **POSITIVE),

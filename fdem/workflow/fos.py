@@ -224,7 +224,7 @@ def fundamental_damping(sim: Simulation) -> Damping:
 
 
 def default_trial_stage(sim: Simulation, equilibrium_ratio: float = 1e-4, max_time: float | None = None,
-                        fail: Failure | None = None, damping: Damping | None = None) -> Stage:
+                        fail: Failure | None = None, damping: Damping | None = None, hold_for: float = 0.0) -> Stage:
     """The damped trial of a factor-of-safety search: :func:`fundamental_damping`, converged
     when the unbalanced-force ratio falls below ``equilibrium_ratio`` (default 1e-4), failed by
     ``fail`` (default: a node moves 1 % of the model height), capped at ``max_time`` (default 5
@@ -232,9 +232,10 @@ def default_trial_stage(sim: Simulation, equilibrium_ratio: float = 1e-4, max_ti
     ``equilibrium_ratio``, ``step_time`` and ``fail_displacement``
     (:class:`fdem.workflow.slope.SlopeWorkflow`), and the damping of its reduction steps
     (``damping``, default :func:`fundamental_damping`), so that its trials and its reduction
-    steps judge a slope by one rule."""
+    steps judge a slope by one rule. ``hold_for`` [s]: the ratio must keep below its limit that
+    long, check after check, before the trial counts as stable (default 0: the first check)."""
     return Stage("trial", max_time=max_time or 5.0 * response_time(sim.model),
-                 converge=Convergence(unbalanced_ratio=equilibrium_ratio), fail=fail or Failure(),
+                 converge=Convergence(unbalanced_ratio=equilibrium_ratio, hold_for=hold_for), fail=fail or Failure(),
                  damping=damping if damping is not None else fundamental_damping(sim))
 
 

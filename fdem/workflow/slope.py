@@ -73,6 +73,12 @@ class SlopeWorkflow:
     fos : ``(lower, upper, tol)`` to search the factor of safety first, or ``None``
     equilibrium_ratio : unbalanced-force ratio that counts as equilibrium (default 1e-4), in the
         equilibrium stage, the reduction steps and the factor-of-safety trials alike
+    equilibrium_hold : response times the ratio must keep below ``equilibrium_ratio``, check after
+        check, before a factor-of-safety trial or a reduction step counts as converged (default 0:
+        the first check that meets it). A slope near its factor breaks a few elements and creeps,
+        its ratio dipping below a raised limit and rising again: on the low-angle coarse
+        four-slope scene with a joint through the toe at 1.0 m, the limit 2.8e-4 passes a trial
+        at F = 1.1125 that is still creeping 15 T later (``docs/cases.md`` A)
     step_time : cap of each damped stage, the factor-of-safety trials included (default ``5 T``: with
         the fundamental-mode damping a stable slope converges within about 1.5 T). The
         equilibrium stage at ``F = 1`` gets twice that: it is where the elastic start's
@@ -117,6 +123,7 @@ class SlopeWorkflow:
     final_strength: float = 0.3
     fos: tuple[float, float, float] | None = None
     equilibrium_ratio: float = 1e-4
+    equilibrium_hold: float = 0.0
     step_time: float | None = None
     fail_displacement: float | None = None
     runout_time: float | None = None
@@ -155,6 +162,9 @@ class SlopeWorkflow:
                 raise ValueError(f"SlopeWorkflow.{name} must lie in (0, 1), got {v!r}")
         for name in ("step_time", "fail_displacement", "runout_time", "local_fall_area"):
             _check_positive(self, name, optional=True)
+        if not (_real(self.equilibrium_hold) and math.isfinite(self.equilibrium_hold) and self.equilibrium_hold >= 0):
+            raise ValueError(f"SlopeWorkflow.equilibrium_hold must be a number of response times >= 0, "
+                             f"got {self.equilibrium_hold!r}")
         if self.local_fall_area is not None and (self.reduction != "steps" or self.trigger != "strength"):
             raise ValueError(f"SlopeWorkflow.local_fall_area carries the reduction steps on after a local fall; "
                              f"with reduction = {self.reduction!r} and trigger = {self.trigger!r} there are none: "
@@ -316,7 +326,8 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             def search():
                 try:
                     return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
-                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped)
+                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped,
+                                                                      wf.equilibrium_hold * T)
                                             ).as_dict()
                 except BracketError as err:
                     return beyond_bracket(err, lower, upper)
@@ -334,7 +345,8 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             for F in wf.factors:
                 r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
                                                 damping=damped, fail=fail,
-                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio)),
+                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio,
+                                                                     hold_for=wf.equilibrium_hold * T)),
                                      journal=journal))
                 if r.reason == "converged":
                     continue
@@ -532,7 +544,7 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, d
     import dataclasses
 
     lower, upper, tol = wf.fos
-    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped)
+    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped, wf.equilibrium_hold * T)
 
     def search():
         try:

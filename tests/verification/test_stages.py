@@ -239,11 +239,29 @@ def test_the_search_judges_its_trials_by_the_rule_of_the_workflow():
 
     s = planar_slope_scene()
     sim = s.sim
-    trial = default_trial_stage(sim, 2e-4, 3.0, Failure(displacement=0.05))
+    trial = default_trial_stage(sim, 2e-4, 3.0, Failure(displacement=0.05), hold_for=0.4)
     assert (trial.converge.unbalanced_ratio, trial.max_time, trial.fail.displacement) == (2e-4, 3.0, 0.05)
+    assert trial.converge.hold_for == 0.4
     summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_ratio=0.5))
     assert summary["fos"]["fos"] is None and summary["fos"]["bracket"] == [1.8, None], summary["fos"]
     assert "stable" in summary["fos"]["error"]
+
+
+def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor():
+    """``equilibrium_hold``: a trial counts as stable only once its ratio has kept below the limit
+    for that many response times. On the planar slope, which stands or slides with nothing
+    between, the held rule finds the Hoek-Bray factor (1.396) within the verification tolerance
+    of 10 % as the first-check rule does, and each stable trial ran at least the hold."""
+    with pytest.raises(ValueError, match="equilibrium_hold"):
+        SlopeWorkflow(equilibrium_hold=-1.0)
+    s = planar_slope_scene()
+    sim = s.sim
+    T = response_time(sim.model)
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"])
+    summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=1.0))
+    assert summary["fos"]["fos"] == pytest.approx(le.fos, rel=0.10), (summary["fos"], le.fos)
+    stable = [t for t in summary["fos"]["trials"] if t["stable"] and t["steps"] > 1]
+    assert stable and all(t["t_end"] - t["t_start"] >= T * (1 - 1e-9) for t in stable), stable
 
 
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
