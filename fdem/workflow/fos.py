@@ -390,6 +390,11 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
 
     search = {"lower": float(lower), "upper": float(upper), "tol": float(tol), "trigger": trigger.name,
               "trial": trial.name, "max_time": trial.max_time}
+    rule = trial.converge
+    if rule is not None and rule.unbalanced_ratio not in (None, 1e-4):  # a trial judged by another rule is
+        search["ratio"] = rule.unbalanced_ratio                          # another search; the default keeps
+    if rule is not None and rule.hold_for:                              # the keys of checkpoints written before
+        search["hold_for"] = rule.hold_for
     progress = None
     cut = None   # (factor, runtime, state) of a trial the checkpoint holds in progress
     start_file = None if journal is None or journal.path is None or workers > 1 else journal.path.with_name(START_NAME)

@@ -250,6 +250,9 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     step_time = wf.step_time or 5.0 * T
+    if wf.equilibrium_hold * T >= step_time:  # every trial and step would run to its cap and count as failing
+        raise ValueError(f"SlopeWorkflow.equilibrium_hold: {wf.equilibrium_hold:g} response times ({wf.equilibrium_hold * T:.4g} s) "
+                         f"do not fit in a stage capped at {step_time:.4g} s (step_time): hold for less, or give a longer step_time")
     fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
     damped = fundamental_damping(sim)
     if "unbalanced_ratio" not in sim.monitors:  # how far from equilibrium, in every history row

@@ -24,7 +24,8 @@ Time scales come from the model (:func:`response_time`): the fundamental period 
 slope of height ``H`` (shear beam on a rigid base) is ``T = 4 H / c_s`` with
 ``c_s = sqrt(mu / rho)`` (Kramer 1996, *Geotechnical Earthquake Engineering*, sec. 7.2); a
 15-30 m slope rings for about 0.3 s. Checks run every ``T / 40``; a stage with rules is
-capped at ``10 T`` by default, a factor-of-safety trial at ``5 T`` (:func:`default_trial_stage`).
+capped at ``10 T`` by default, a factor-of-safety trial at ``5 T`` (:func:`default_trial_stage`;
+the slope workflow gives its trials its own ``step_time``).
 """
 from __future__ import annotations
 

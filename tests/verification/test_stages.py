@@ -257,6 +257,9 @@ def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor():
     s = planar_slope_scene()
     sim = s.sim
     T = response_time(sim.model)
+    with pytest.raises(ValueError, match="do not fit in a stage capped"):  # refused before any step
+        run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=5.0))
+    assert sim.state.step == 0
     le = pf.analytic(**pf.GEOMETRIES["no_crack"])
     summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=1.0))
     assert summary["fos"]["fos"] == pytest.approx(le.fos, rel=0.10), (summary["fos"], le.fos)
