@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from fdem.io.jsonable import write_json
-from fdem.io.messages import say, warn
+from fdem.io.messages import say
 import math
 import numbers
 import time
@@ -401,9 +401,12 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if journal is not None:
         progress = journal.marks.get(TRIALS_MARK)
         if progress is not None and progress.get("search") != search:
-            warn(f"factor of safety: the {len(progress['trials'])} trial(s) in the checkpoint belong to another "
-                 f"search ({progress.get('search')}); they are not replayed")
-            progress = None
+            # refused, not set aside: run on, the next checkpoint would replace the trials it holds
+            # (hours of a fine mesh's search) with this search's, and a resume by the code that
+            # wrote them could no longer go on with them
+            raise ValueError(f"resume: the checkpoint holds {len(progress['trials'])} finished trial(s) of another "
+                             f"search ({progress.get('search')}) than this one ({search}); resume it with the "
+                             f"commit and options that wrote it, or start the search again in a new directory")
         fresh = progress is None
         if fresh:
             progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}

@@ -466,17 +466,45 @@ def test_a_checkpoint_inside_a_trial_is_refused_by_a_search_that_cannot_go_on_wi
     trials are not checkpointed inside), is refused before any trial, naming the trial: run on,
     that search would start from the trial's state with the trial's factor applied."""
     from fdem.workflow import fos as fos_module
-    from fdem.workflow.fos import factor_of_safety
+    from fdem.workflow.fos import default_trial_stage, factor_of_safety
     from fdem.workflow.journal import RunJournal
 
     sim = planar_slope_scene(out_dir=tmp_path, pictures=False).sim
     journal = RunJournal(tmp_path / "checkpoint.npz")
-    journal.marks[fos_module.TRIALS_MARK] = {"search": {"lower": 1.0, "upper": 2.0, "tol": 0.1}, "trials": [],
-                                             "first_fail": None, "running": 1.5}
+    trial = default_trial_stage(sim, max_time=1.0)
+    search = {"lower": 1.0, "upper": 2.0, "tol": 0.1, "trigger": "strength reduction", "trial": trial.name,
+              "max_time": 1.0}   # the same search, but run by two workers
+    journal.marks[fos_module.TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None, "running": 1.5}
     journal.resume = {"name": "trial_F1.5000"}
     with pytest.raises(ValueError, match="trial_F1.5000"):
-        factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, workers=2, build=planar_slope_scene, journal=journal)
+        factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, workers=2, build=planar_slope_scene, journal=journal,
+                         trial=trial)
     assert sim.state.step == 0   # nothing ran
+    sim.close()
+
+
+def test_a_checkpoint_of_another_search_is_refused_and_kept(tmp_path):
+    """A checkpoint whose finished trials belong to another search (other bracket, or another
+    trial rule: a raised ratio) is refused before any step, and left as it was: set aside, the
+    search's first checkpoint would replace those trials, hours of them on a fine mesh."""
+    from fdem.solve.checkpoint import read_checkpoint
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.fos import default_trial_stage, factor_of_safety
+    from fdem.workflow.journal import RunJournal
+
+    sim = planar_slope_scene(out_dir=tmp_path, pictures=False).sim
+    journal = RunJournal(tmp_path / "checkpoint.npz")
+    other = {"lower": 1.0, "upper": 2.0, "tol": 0.1, "trigger": "strength reduction", "trial": "trial",
+             "max_time": 1.0, "ratio": 2.8e-4}
+    journal.marks[fos_module.TRIALS_MARK] = {"search": other, "trials": [{"factor": 1.5}], "first_fail": None}
+    journal.write(sim, "a search under another rule")
+    written = (tmp_path / "checkpoint.npz").read_bytes()
+    trial = default_trial_stage(sim, max_time=1.0)
+    with pytest.raises(ValueError, match="another search"):
+        factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, trial=trial, journal=journal)
+    assert sim.state.step == 0   # nothing ran
+    assert (tmp_path / "checkpoint.npz").read_bytes() == written
+    assert read_checkpoint(tmp_path / "checkpoint.npz")["context"]["marks"][fos_module.TRIALS_MARK]["search"] == other
     sim.close()
 
 
