@@ -201,11 +201,12 @@ def scene_ensemble(path: str | Path, n: int | None = None, seed: int | None = No
     fos = settings["fos"]
     if not (isinstance(fos, list) and len(fos) == 3):
         raise SceneError(f"{path}: [ensemble] fos must be [lower, upper, tolerance], got {fos!r}")
+    from fdem.scene.objects import workflow
+
+    search = workflow(scene)   # each realization's search is judged by the scene's trial rule
     runout = None
     if settings["runout"]:
-        from fdem.scene.objects import workflow
-
-        runout = workflow(scene)
+        runout = search
         if runout.reduction == "none":
             raise SceneError(f"{path}: [ensemble] runout = true runs each realization's workflow after its search, "
                              f"and [workflow] reduction = \"none\" has none: set reduction to steps or rate, or "
@@ -214,6 +215,6 @@ def scene_ensemble(path: str | Path, n: int | None = None, seed: int | None = No
         return Ensemble(realization, dists, n=settings["n"] if n is None else n,
                         seed=settings["seed"] if seed is None else seed,
                         method=settings["method"] if method is None else method, fos=tuple(fos), runout=runout,
-                        pictures=pictures, max_time=max_time)
+                        pictures=pictures, max_time=max_time, search=search)
     except ValueError as err:
         raise SceneError(f"{path}: [ensemble]: {err}") from None

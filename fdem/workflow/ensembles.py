@@ -189,6 +189,17 @@ def _callable_name(obj) -> str:
     return f"{module_of(obj)}:{name}"
 
 
+# the SlopeWorkflow settings a search's trial is judged by
+SEARCH_RULE = ("equilibrium_ratio", "equilibrium_hold", "step_time", "fail_displacement")
+
+
+def _search_rule(wf=None) -> dict:
+    """The :data:`SEARCH_RULE` settings of ``wf`` (default: a default SlopeWorkflow's)."""
+    from fdem.workflow.slope import SlopeWorkflow
+
+    return {k: getattr(SlopeWorkflow() if wf is None else wf, k) for k in SEARCH_RULE}
+
+
 @dataclass(frozen=True)
 class Ensemble:
     """Description of a stochastic ensemble (see the module docstring).
@@ -210,6 +221,11 @@ class Ensemble:
     max_time : cap [s] on each trial's simulated time, or ``None`` (the trial's own cap, 5 T).
         A smoke setting: a capped trial counts as failing, so realizations end
         ``below_bracket``; the cap is part of the description, so it never mixes with real runs
+    search : a :class:`fdem.workflow.slope.SlopeWorkflow` whose trial rule judges the search's
+        trials (its ``equilibrium_ratio``, ``equilibrium_hold``, ``step_time`` and
+        ``fail_displacement``, :func:`fdem.workflow.slope.trial_stage`), as ``fdem run`` judges
+        the scene's own search; ``None``: the default trial
+        (:func:`fdem.workflow.fos.default_trial_stage`)
     """
 
     scene: Callable
@@ -222,6 +238,7 @@ class Ensemble:
     toe_x: float | None = None
     pictures: bool = True
     max_time: float | None = None
+    search: object = None
 
     def __post_init__(self):
         object.__setattr__(self, "parameters", dict(self.parameters))
@@ -245,6 +262,9 @@ class Ensemble:
             raise ValueError(f"ensemble fos bracket must be 0 < lower < upper with tol > 0, got {self.fos!r}")
         if self.max_time is not None and not (finite_number(self.max_time) and self.max_time > 0):
             raise ValueError(f"ensemble max_time must be a positive number of seconds, got {self.max_time!r}")
+        if self.search is not None and not all(hasattr(self.search, k) for k in SEARCH_RULE):
+            raise ValueError(f"ensemble search must be a SlopeWorkflow (its trial rule judges the search), "
+                             f"got {self.search!r}")
 
     def describe(self) -> dict:
         """Everything that decides the results, as JSON-ready data (the hash covers this)."""
@@ -254,7 +274,10 @@ class Ensemble:
                 "n": int(self.n), "seed": int(self.seed), "method": self.method, "fos": list(self.fos),
                 "runout": None if wf is None else repr(wf), "toe_x": self.toe_x,
                 # only when set, so the fingerprints of existing uncapped ensembles stay the same
-                **({"max_time": float(self.max_time)} if self.max_time is not None else {})}
+                **({"max_time": float(self.max_time)} if self.max_time is not None else {}),
+                # only when not the default trial's, so that the fingerprints of ensembles judged by
+                # it stay as they were before the rule was kept
+                **({"search": _search_rule(self.search)} if _search_rule(self.search) != _search_rule() else {})}
 
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`describe` (canonical JSON)."""
@@ -336,8 +359,12 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         try:
             with tempfile.TemporaryDirectory() as tmp:
                 trial = None
+                if ensemble.search is not None:  # the scene's own trial rule, as its fdem run judges it
+                    from fdem.workflow.slope import trial_stage
+
+                    trial = trial_stage(sim, ensemble.search)
                 if ensemble.max_time is not None:
-                    trial = default_trial_stage(sim)
+                    trial = trial or default_trial_stage(sim)
                     trial = dataclasses.replace(trial, max_time=min(trial.max_time, ensemble.max_time))
                 res = factor_of_safety(sim, lower, upper, tol=tol, trial=trial,
                                        out_dir=tmp if ensemble.pictures else None)

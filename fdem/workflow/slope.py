@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field
+from typing import NamedTuple
 import numpy as np
 from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
@@ -231,6 +232,46 @@ def check_measured_step(sim: Simulation) -> None:
         raise ValueError(f"runout_step = 'measured' cannot measure this model: {why}; use runout_step = 'bound'")
 
 
+class StageRules(NamedTuple):
+    """The scales and rules every damped stage of the workflow shares: the response time ``T``
+    [s] (:func:`fdem.workflow.stages.response_time`), the model height [m], ``g`` [m/s^2], the
+    cap of a trial or reduction step [s] (``step_time``, default ``5 T``), its failure rule
+    (``fail_displacement``, default 1 % of the height), its damping
+    (:func:`fdem.workflow.fos.fundamental_damping`) and its convergence rule (the unbalanced-force
+    ratio below ``equilibrium_ratio``, kept there ``equilibrium_hold * T`` seconds)."""
+
+    T: float
+    height: float
+    g: float
+    step_time: float
+    fail: Failure
+    damped: Damping
+    converge: Convergence
+
+
+def stage_rules(sim: Simulation, wf: SlopeWorkflow) -> StageRules:
+    """The :class:`StageRules` of ``wf`` on ``sim``; a hold that does not fit in the stage cap is
+    refused here, before any step (every trial and step would run to its cap and count as failing)."""
+    T = response_time(sim.model)
+    height = float(np.ptp(sim.model.topology.x0[:, 1]))
+    step_time = wf.step_time or 5.0 * T
+    hold = wf.equilibrium_hold * T
+    if hold >= step_time:
+        raise ValueError(f"SlopeWorkflow.equilibrium_hold: {wf.equilibrium_hold:g} response times ({hold:.4g} s) "
+                         f"do not fit in a stage capped at {step_time:.4g} s (step_time): hold for less, or give a longer step_time")
+    return StageRules(T=T, height=height, g=float(np.linalg.norm(sim.gravity)) or 9.81, step_time=step_time,
+                      fail=Failure(displacement=wf.fail_displacement or 0.01 * height), damped=fundamental_damping(sim),
+                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio, hold_for=hold))
+
+
+def trial_stage(sim: Simulation, wf: SlopeWorkflow, rules: StageRules | None = None) -> Stage:
+    """The factor-of-safety trial ``wf`` judges by (:func:`fdem.workflow.fos.default_trial_stage`
+    with the workflow's :class:`StageRules`): the strength and gravity searches of
+    :func:`run_slope_workflow` and each realization of a scene's ensemble run the same trial."""
+    r = rules or stage_rules(sim, wf)
+    return default_trial_stage(sim, r.converge.unbalanced_ratio, r.step_time, r.fail, r.damped, r.converge.hold_for)
+
+
 def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, out_dir=None,
                        journal=None) -> dict:
     """Run the slope workflow (module docstring) on ``sim``; returns a summary of plain JSON
@@ -246,25 +287,17 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
         raise ValueError("run_slope_workflow needs crack elements (a CrackSet provider)")
     if wf.runout_step == "measured":  # refused now, not when the runout starts hours in
         check_measured_step(sim)
-    T = response_time(sim.model)
-    height = float(np.ptp(sim.model.topology.x0[:, 1]))
-    g = float(np.linalg.norm(sim.gravity)) or 9.81
-    step_time = wf.step_time or 5.0 * T
-    if wf.equilibrium_hold * T >= step_time:  # every trial and step would run to its cap and count as failing
-        raise ValueError(f"SlopeWorkflow.equilibrium_hold: {wf.equilibrium_hold:g} response times ({wf.equilibrium_hold * T:.4g} s) "
-                         f"do not fit in a stage capped at {step_time:.4g} s (step_time): hold for less, or give a longer step_time")
-    fail = Failure(displacement=wf.fail_displacement or 0.01 * height)
-    damped = fundamental_damping(sim)
+    rules = stage_rules(sim, wf)
     if "unbalanced_ratio" not in sim.monitors:  # how far from equilibrium, in every history row
         sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)
-    summary: dict = {"response_time_s": T, "stages": [], "fos": None, "failed_at_factor": None}
+    summary: dict = {"response_time_s": rules.T, "stages": [], "fos": None, "failed_at_factor": None}
 
     def record(result):
         summary["stages"].append(result.as_dict())
         return result
 
     try:
-        _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir, journal)
+        _run_stages(sim, wf, summary, record, cracks, rules, out_dir, journal)
     except KeyboardInterrupt as stop:
         # Ctrl-C or a signal, at a whole step: the stages so far and the state reached are
         # kept, so the caller can still write its report and pictures; the journal has written
@@ -301,7 +334,8 @@ def run_slope_workflow(sim: Simulation, workflow: SlopeWorkflow | None = None, o
     return summary
 
 
-def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail, damped, out_dir, journal) -> None:
+def _run_stages(sim, wf, summary, record, cracks, rules, out_dir, journal) -> None:
+    T, height, g, step_time, fail, damped = rules[:6]
     if journal is None or journal.resume is None and not journal.done:
         cracks.hold_elastic(False)
     eq = record(run_stage(sim, Stage("equilibrium", max_time=2.0 * step_time, reduction=1.0,
@@ -316,7 +350,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         summary["outcome"] = "failed"
         summary["failed_at_factor"] = 1.0
     elif wf.trigger == "gravity":
-        _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, damped, out_dir, journal)
+        _gravity_increase(sim, wf, summary, record, rules, out_dir, journal)
         return
     else:
         if wf.fos is not None:
@@ -329,9 +363,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
             def search():
                 try:
                     return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
-                                            trial=default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped,
-                                                                      wf.equilibrium_hold * T)
-                                            ).as_dict()
+                                            trial=trial_stage(sim, wf, rules)).as_dict()
                 except BracketError as err:
                     return beyond_bracket(err, lower, upper)
 
@@ -347,9 +379,7 @@ def _run_stages(sim, wf, summary, record, cracks, T, height, g, step_time, fail,
         if wf.reduction == "steps":
             for F in wf.factors:
                 r = record(run_stage(sim, Stage(f"reduction_F{F:.3f}", max_time=step_time, reduction=F,
-                                                damping=damped, fail=fail,
-                                                converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio,
-                                                                     hold_for=wf.equilibrium_hold * T)),
+                                                damping=damped, fail=fail, converge=rules.converge),
                                      journal=journal))
                 if r.reason == "converged":
                     continue
@@ -537,7 +567,7 @@ def _tell_local_fall(sim, wf, summary: dict, fail_displacement: float, journal=N
                          f"off the face, not the slope")
 
 
-def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, damped, out_dir, journal) -> None:
+def _gravity_increase(sim, wf, summary, record, rules, out_dir, journal) -> None:
     """The gravity-increase workflow after equilibrium: the critical gravity factor ``k`` by
     bisection on ``wf.fos`` (:class:`fdem.workflow.fos.GravityIncrease`), then, at the bracket's
     failing factor, a damped ``onset`` stage (the failing trial's: it ends when a node has moved
@@ -546,8 +576,9 @@ def _gravity_increase(sim, wf, summary, record, T, height, g, step_time, fail, d
     still standing at the upper factor is ``stable``; one failing at the lower is loaded there."""
     import dataclasses
 
+    T, height, g, step_time, fail, damped = rules[:6]
     lower, upper, tol = wf.fos
-    trial = default_trial_stage(sim, wf.equilibrium_ratio, step_time, fail, damped, wf.equilibrium_hold * T)
+    trial = trial_stage(sim, wf, rules)
 
     def search():
         try:

@@ -505,6 +505,41 @@ def test_an_ensemble_varies_the_scene_keys_it_names(tmp_path):
     assert high["fos_lower"] >= low["fos_lower"] and high["fos"] > low["fos"]
 
 
+def test_an_ensembles_search_judges_its_trials_by_the_scenes_rule(tmp_path, monkeypatch):
+    """Each realization's search runs the trial ``fdem run`` runs for the scene's own search
+    (:func:`fdem.workflow.slope.trial_stage`): a raised ``equilibrium_ratio`` and a hold in
+    ``[workflow]`` reach it, and they are part of the ensemble's description (its table is not
+    one of the default rule's); a scene on the default rule describes itself as before."""
+    from fdem.scene.ensemble import scene_ensemble
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.ensembles import realize
+    from fdem.workflow.slope import trial_stage
+    from fdem.workflow.stages import response_time
+
+    ruled = SMALL_SLOPE + '[workflow]\nequilibrium_ratio = 2e-4\nequilibrium_hold = 0.5\nstep_time = 0.4\n'
+    plain, judged = scene_ensemble(_write(tmp_path, SMALL_SLOPE + ENSEMBLE)), scene_ensemble(
+        _write(tmp_path, ruled + ENSEMBLE, "ruled.toml"))
+    assert "search" not in plain.describe()
+    assert judged.describe()["search"] == {"equilibrium_ratio": 2e-4, "equilibrium_hold": 0.5, "step_time": 0.4,
+                                           "fail_displacement": None}
+    assert judged.fingerprint() != plain.fingerprint()
+    seen = {}
+
+    def search(sim, lower, upper, tol, trial=None, **_):
+        seen["trial"], seen["T"] = trial, response_time(sim.model)
+        seen["expected"] = trial_stage(sim, judged.search)
+        raise RuntimeError("the trial is all this test needs")
+
+    monkeypatch.setattr(fos_module, "factor_of_safety", search)
+    row = realize(judged, 0, judged.sample()[0])
+    assert "the trial is all this test needs" in row["error"]
+    trial = seen["trial"]
+    assert trial.converge.unbalanced_ratio == 2e-4 and trial.max_time == 0.4
+    assert trial.converge.hold_for == pytest.approx(0.5 * seen["T"])
+    assert (trial.converge, trial.max_time, trial.fail) == (seen["expected"].converge, seen["expected"].max_time,
+                                                            seen["expected"].fail)
+
+
 # ----------------------------------------------------------------------------- gravity increase
 def test_gravity_increase_matches_strength_reduction_for_frictionless_joints(tmp_path):
     """With no friction anywhere (phi = 0 on every crack set), the stresses grow as gravity

@@ -265,8 +265,10 @@ def scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal=None) -> dic
         summary["stages"].append(result.as_dict())
         return result
 
-    slope._run_stages(sim, wf, summary, record, cracks, 1.0, 10.0, 9.81, 5.0, slope.Failure(displacement=0.3),
-                      slope.NO_DAMPING, None, journal)
+    rules = slope.StageRules(T=1.0, height=10.0, g=9.81, step_time=5.0, fail=slope.Failure(displacement=0.3),
+                             damped=slope.NO_DAMPING,
+                             converge=slope.Convergence(unbalanced_ratio=wf.equilibrium_ratio, hold_for=wf.equilibrium_hold))
+    slope._run_stages(sim, wf, summary, record, cracks, rules, None, journal)
     return summary
 
 
