@@ -17,6 +17,9 @@ unit in brackets (``[-]`` for a pure number).
 * :func:`kinetic_energy_plot`: kinetic energy [J/m] against time, stages shaded and labelled.
 * :func:`crack_count_plot`: cumulative broken crack elements by mode against time.
 * :func:`fragment_size_plot`: number of fragments per log-spaced area bin.
+* :func:`trial_histories_plot`: a factor-of-safety search's trials, each one's unbalanced-force
+  ratio and displacement against its own time, beside the ratio limit: which trials settled
+  and which crept.
 
 The magnitude-frequency picture needs the event statistics and lives with them
 (:func:`fdem.results.events.magnitude_plot`); the animation of a run's frames is
@@ -31,7 +34,7 @@ import numpy as np
 __all__ = ["MODE_COLOURS", "MODE_LABELS", "new_figure", "save_figure", "finish", "mode_codes", "as_segments",
            "boundary_segments", "arrow_sample", "draw_failure", "failure_frame", "crack_segments_at", "mechanism_frames", "geostatic_stress_map",
            "crack_time_map", "stage_spans", "group_label", "group_stages", "stage_label_rows", "mark_stages", "kinetic_energy_plot",
-           "crack_count_plot", "fragment_size_plot"]
+           "crack_count_plot", "fragment_size_plot", "trial_histories_plot"]
 
 
 MODE_COLOURS = {1: "#e8112d", 2: "#ffffff", 3: "#ff9e1b"}
@@ -706,4 +709,44 @@ def fragment_size_plot(path: str | os.PathLike | None, areas: np.ndarray, bins_p
     fig.tight_layout()
     if ax0 is not None and stage is not None:
         mark_stages(fig, ax0, np.asarray(time, float)[:n], np.asarray(stage)[:n])
+    return finish(fig, path, dpi)
+
+
+def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], limit: float | None = None,
+                         hold: float = 0.0, trigger: str = "F", title: str = "", dpi: int = 130):
+    """The trials of a factor-of-safety search against each trial's own time [s]: above, the
+    unbalanced-force ratio [-] (log axis) with the ``limit`` a trial must keep below for ``hold``
+    seconds to count as stable; below, the growth of the largest displacement [m] since the
+    trial's first history row. One curve per trial, blue for stable, red for failing, darker for
+    a larger factor, labelled with it. A trial that settles falls through the limit and stays
+    there; one that creeps hovers near it while its displacement keeps growing.
+    ``trials``: dicts with ``factor``, ``stable``, and arrays ``time`` [s] (since the trial's start),
+    ``ratio`` and ``displacement`` [m] of equal length."""
+    from matplotlib import colormaps
+
+    fig = new_figure((8.0, 6.0))
+    top, bottom = fig.add_subplot(211), fig.add_subplot(212)
+    shades = {True: colormaps["Blues"], False: colormaps["Reds"]}
+    for stable in (True, False):
+        group = sorted((t for t in trials if bool(t["stable"]) == stable), key=lambda t: t["factor"])
+        for k, t in enumerate(group):
+            time, ratio, disp = (np.asarray(t[key], float) for key in ("time", "ratio", "displacement"))
+            _same_length(time=time, ratio=ratio, displacement=disp)
+            colour = shades[stable](0.45 + 0.5 * (k + 1) / len(group))
+            label = f"{trigger} = {t['factor']:.4g} {'stable' if stable else 'failing'}"
+            top.plot(time, ratio, color=colour, lw=1.1, label=label)
+            bottom.plot(time, disp, color=colour, lw=1.1)
+    if limit is not None:
+        top.axhline(limit, color="k", ls="--", lw=0.9,
+                    label=f"limit {limit:.3g}" + (f", held {hold:.3g} s" if hold else ""))
+    top.set_yscale("log")
+    top.set_ylabel("unbalanced-force ratio [-]")
+    top.set_title(title or f"factor-of-safety trials: {len(trials)}")
+    top.legend(fontsize=7, ncol=2)
+    bottom.set_yscale("log")   # creep (a line still rising) and rest (flat) read alike at mm and m
+    bottom.set_ylabel("largest displacement, growth [m]")
+    for ax in (top, bottom):
+        ax.set_xlabel("time since the trial's start [s]")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
     return finish(fig, path, dpi)

@@ -27,7 +27,7 @@ from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, respo
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
-           "TRIALS_MARK", "START_NAME"]
+           "TRIALS_MARK", "START_NAME", "trial_curves"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -572,7 +572,48 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         write_json(out / "fos.json", result.as_dict())
         if result.failure_positions is not None and cracks is not None:
             _failure_picture(out / "fos_failure.png", sim, cracks, result)
+        _trials_picture(out / "fos_trials.png", sim, result, trial)
     return result
+
+
+def trial_curves(result: FoSResult) -> list[dict]:
+    """Each trial's history (its ``rows``) as the curves of
+    :func:`fdem.io.pictures.trial_histories_plot`: time since the trial's first row [s], the
+    unbalanced-force ratio, and the growth of the largest displacement since that row [m]. Trials
+    without rows (run by parallel workers) or histories without the ratio column are left out."""
+    curves = []
+    for t in result.trials:
+        rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
+        if not rows:
+            continue
+        time = np.array([float(r["time"]) for r in rows])
+        disp = np.array([float(r["max_displacement"]) for r in rows])
+        curves.append({"factor": t.factor, "stable": t.stable, "time": time - time[0],
+                       "ratio": np.array([float(r["unbalanced_ratio"]) for r in rows]), "displacement": disp - disp[0]})
+    return curves
+
+
+def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:
+    """``fos_trials.png``: every trial's ratio and displacement against its own time, with the
+    limit its rule applied (raised to the round-off floor of the search's start state as
+    :func:`fdem.workflow.stages.run_stage` raises it)."""
+    from fdem.io.pictures import trial_histories_plot
+
+    curves = trial_curves(result)
+    if not curves:
+        return None
+    conv, limit = trial.converge, None
+    if conv is not None and conv.unbalanced_ratio is not None:
+        limit = conv.unbalanced_ratio
+        if conv.roundoff_factor is not None:
+            from fdem.solve.geostatic import unbalanced_ratio_floor
+
+            try:
+                limit = max(limit, conv.roundoff_factor * unbalanced_ratio_floor(sim))
+            except ValueError:  # no gravity and no load: the bare limit
+                pass
+    return trial_histories_plot(path, curves, limit=limit, hold=conv.hold_for if conv is not None else 0.0,
+                                trigger="F" if result.trigger == "strength reduction" else "k")
 
 
 def _failure_picture(path: Path, sim: Simulation, cracks, result: FoSResult) -> Path:

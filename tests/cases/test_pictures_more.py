@@ -12,7 +12,7 @@ from fdem.io.pictures import (arrow_sample, boundary_segments, crack_count_plot,
                               failure_frame, mechanism_frames,
                               fragment_size_plot, geostatic_stress_map, group_label, group_stages, kinetic_energy_plot,
                               stage_label_rows,
-                              stage_spans)
+                              stage_spans, trial_histories_plot)
 from fdem.io.vtk import PvdSeries, VTK_LINE, VTK_TRIANGLE, read_pvd
 from fdem.mesh.mesh import structured_rectangle
 from fdem.mesh.topology import build_topology
@@ -161,6 +161,9 @@ def all_figures():
         "sensitivity": sensitivity_figure(ok, fos, ["cohesion", "friction_angle", "new_thing"],
                                           {p: {"rho": 0.5} for p in ("cohesion", "friction_angle", "new_thing")}),
         "runout_distribution": runout_figure(rng.uniform(0, 10, 20), rng.uniform(0, 50, 20)),
+        "trial_histories_plot": trial_histories_plot(
+            None, [{"factor": f, "stable": f < 1.3, "time": t, "ratio": np.exp(-t) * f,
+                    "displacement": 1e-3 * t * f} for f in (1.1, 1.2, 1.4)], limit=1e-4, hold=0.4),
     }
 
 

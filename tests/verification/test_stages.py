@@ -247,11 +247,13 @@ def test_the_search_judges_its_trials_by_the_rule_of_the_workflow():
     assert "stable" in summary["fos"]["error"]
 
 
-def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor():
+def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor(tmp_path):
     """``equilibrium_hold``: a trial counts as stable only once its ratio has kept below the limit
     for that many response times. On the planar slope, which stands or slides with nothing
     between, the held rule finds the Hoek-Bray factor (1.396) within the verification tolerance
-    of 10 % as the first-check rule does, and each stable trial ran at least the hold."""
+    of 10 % as the first-check rule does, and each stable trial ran at least the hold; the
+    search's picture of its trials (ratio and displacement against each trial's time) shows
+    every stable trial ending under the limit."""
     with pytest.raises(ValueError, match="equilibrium_hold"):
         SlopeWorkflow(equilibrium_hold=-1.0)
     s = planar_slope_scene()
@@ -261,10 +263,13 @@ def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor():
         run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=5.0))
     assert sim.state.step == 0
     le = pf.analytic(**pf.GEOMETRIES["no_crack"])
-    summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=1.0))
+    summary = run_slope_workflow(sim, SlopeWorkflow(reduction="none", fos=(1.0, 1.8, 0.1), equilibrium_hold=1.0),
+                                 out_dir=tmp_path)
     assert summary["fos"]["fos"] == pytest.approx(le.fos, rel=0.10), (summary["fos"], le.fos)
     stable = [t for t in summary["fos"]["trials"] if t["stable"] and t["steps"] > 1]
     assert stable and all(t["t_end"] - t["t_start"] >= T * (1 - 1e-9) for t in stable), stable
+    assert all(t["unbalanced_ratio"] <= 1e-4 for t in stable)
+    assert (tmp_path / "fos_trials.png").stat().st_size > 0
 
 
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
