@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from fdem.io.jsonable import write_json
-from fdem.io.messages import say
+from fdem.io.messages import say, warn
 import math
 import numbers
 import time
@@ -570,9 +570,15 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / "fos.json", result.as_dict())
-        if result.failure_positions is not None and cracks is not None:
-            _failure_picture(out / "fos_failure.png", sim, cracks, result)
-        _trials_picture(out / "fos_trials.png", sim, result, trial)
+        # the pictures come after the result is on disk, and a picture that cannot be drawn (a
+        # full disk, a broken matplotlib) is told, not raised: the search of hours is kept
+        try:
+            if result.failure_positions is not None and cracks is not None:
+                _failure_picture(out / "fos_failure.png", sim, cracks, result)
+            _trials_picture(out / "fos_trials.png", sim, result, trial)
+        except Exception as err:  # noqa: BLE001 - any picture failure; the result is what matters
+            warn(f"factor of safety: a picture of the search could not be drawn ({type(err).__name__}: {err}); "
+                 f"the result is in {out / 'fos.json'}")
     return result
 
 

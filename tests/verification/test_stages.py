@@ -272,6 +272,30 @@ def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor(tmp_path):
     assert (tmp_path / "fos_trials.png").stat().st_size > 0
 
 
+def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
+    """The search's pictures come after its result: one that raises (a full disk, a broken
+    plotting library) is told, and the search still returns its bracket with fos.json on disk;
+    the bracket ends are Hoek-Bray's sides (stable at 1.0, failing at 1.8 against 1.396)."""
+    import json
+
+    from fdem.io import pictures
+    from fdem.workflow.fos import factor_of_safety
+
+    def broken(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pictures, "trial_histories_plot", broken)
+    monkeypatch.setattr(pictures, "failure_frame", broken)
+    from fdem.solve.geostatic import unbalanced_force_ratio
+
+    sim = planar_slope_scene().sim
+    sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)   # the trials' curves, as the workflow keeps them
+    result = factor_of_safety(sim, lower=1.0, upper=1.8, tol=0.8, out_dir=tmp_path)
+    assert result.bracket == (1.0, 1.8)
+    assert json.loads((tmp_path / "fos.json").read_text())["bracket"] == [1.0, 1.8]
+    sim.close()
+
+
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
     """Planar block, c = 20 kPa, phi = 30 deg on a 35 deg plane: limit equilibrium fails when
     gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
