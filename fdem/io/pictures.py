@@ -721,7 +721,8 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
     a larger factor, labelled with it. A trial that settles falls through the limit and stays
     there; one that creeps hovers near it while its displacement keeps growing.
     ``trials``: dicts with ``factor``, ``stable``, and arrays ``time`` [s] (since the trial's start),
-    ``ratio`` and ``displacement`` [m] of equal length."""
+    ``ratio`` and ``displacement`` [m] of equal length; optionally ``limit``, the trial's own limit
+    (drawn dotted in its colour) where the trials' limits differ."""
     from matplotlib import colormaps
 
     fig = new_figure((8.0, 6.0))
@@ -735,6 +736,8 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
             colour = shades[stable](0.45 + 0.5 * (k + 1) / len(group))
             label = f"{trigger} = {t['factor']:.4g} {'stable' if stable else 'failing'}"
             top.plot(time, ratio, color=colour, lw=1.1, label=label)
+            if t.get("limit") is not None:   # a trial's own limit, where the trials' differ
+                top.axhline(t["limit"], color=colour, ls=":", lw=0.8)
             bottom.plot(time, disp, color=colour, lw=1.1)
     if limit is not None:
         top.axhline(limit, color="k", ls="--", lw=0.9,

@@ -194,10 +194,12 @@ SEARCH_RULE = ("equilibrium_ratio", "equilibrium_hold", "step_time", "fail_displ
 
 
 def _search_rule(wf=None) -> dict:
-    """The :data:`SEARCH_RULE` settings of ``wf`` (default: a default SlopeWorkflow's)."""
+    """The :data:`SEARCH_RULE` settings of ``wf`` (default: a default SlopeWorkflow's), as floats
+    (``equilibrium_hold=1`` and ``1.0`` are one rule, one fingerprint)."""
     from fdem.workflow.slope import SlopeWorkflow
 
-    return {k: getattr(SlopeWorkflow() if wf is None else wf, k) for k in SEARCH_RULE}
+    rule = {k: getattr(SlopeWorkflow() if wf is None else wf, k) for k in SEARCH_RULE}
+    return {k: None if v is None else float(v) for k, v in rule.items()}
 
 
 @dataclass(frozen=True)

@@ -366,7 +366,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     the history steps of the uninterrupted one), and ``wall_seconds`` counts the replayed
     trials' own.
     """
-    from fdem.solve.checkpoint import restore, save_checkpoint, snapshot
+    from fdem.solve.checkpoint import CheckpointMismatch, restore, save_checkpoint, snapshot
 
     check_bracket(lower, upper, tol, max_trials)
     workers = int(workers)
@@ -404,7 +404,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             # refused, not set aside: run on, the next checkpoint would replace the trials it holds
             # (hours of a fine mesh's search) with this search's, and a resume by the code that
             # wrote them could no longer go on with them
-            raise ValueError(f"resume: the checkpoint holds {len(progress['trials'])} finished trial(s) of another "
+            raise CheckpointMismatch(f"the checkpoint holds {len(progress['trials'])} finished trial(s) of another "
                              f"search ({progress.get('search')}) than this one ({search}); resume it with the "
                              f"commit and options that wrote it, or start the search again in a new directory")
         fresh = progress is None
@@ -414,7 +414,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         in_trial = runtime is not None and str(runtime.get("name", "")).startswith(f"{trial.name}_F")
         if in_trial and not (workers == 1 and judge is None and running is not None
                              and runtime["name"] == _trial_stage_at(trial, float(running)).name):
-            raise ValueError(f"resume: the checkpoint was written in the factor-of-safety trial {runtime['name']!r}, "
+            raise CheckpointMismatch(f"the checkpoint was written in the factor-of-safety trial {runtime['name']!r}, "
                              f"which this search ({workers} worker(s){', judged' if judge is not None else ''}, "
                              f"{search}) cannot go on with; resume with the options the run started with")
         if in_trial and (start_file is None or not start_file.is_file()):
@@ -575,7 +575,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         try:
             if result.failure_positions is not None and cracks is not None:
                 _failure_picture(out / "fos_failure.png", sim, cracks, result)
-            _trials_picture(out / "fos_trials.png", sim, result, trial)
+            _trials_picture(out / "fos_trials.png", result, trial)
         except Exception as err:  # noqa: BLE001 - any picture failure; the result is what matters
             warn(f"factor of safety: a picture of the search could not be drawn ({type(err).__name__}: {err}); "
                  f"the result is in {out / 'fos.json'}")
@@ -585,8 +585,9 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
 def trial_curves(result: FoSResult) -> list[dict]:
     """Each trial's history (its ``rows``) as the curves of
     :func:`fdem.io.pictures.trial_histories_plot`: time since the trial's first row [s], the
-    unbalanced-force ratio, and the growth of the largest displacement since that row [m]. Trials
-    without rows (run by parallel workers) or histories without the ratio column are left out."""
+    unbalanced-force ratio, the growth of the largest displacement since that row [m], and the
+    ratio limit the trial's rule applied (``StageResult.ratio_limit``). Trials without rows (run
+    by parallel workers) or histories without the ratio column are left out."""
     curves = []
     for t in result.trials:
         rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
@@ -595,30 +596,28 @@ def trial_curves(result: FoSResult) -> list[dict]:
         time = np.array([float(r["time"]) for r in rows])
         disp = np.array([float(r["max_displacement"]) for r in rows])
         curves.append({"factor": t.factor, "stable": t.stable, "time": time - time[0],
-                       "ratio": np.array([float(r["unbalanced_ratio"]) for r in rows]), "displacement": disp - disp[0]})
+                       "ratio": np.array([float(r["unbalanced_ratio"]) for r in rows]), "displacement": disp - disp[0],
+                       "limit": t.result.ratio_limit})
     return curves
 
 
-def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:
+def _trials_picture(path: Path, result: FoSResult, trial: Stage) -> Path | None:
     """``fos_trials.png``: every trial's ratio and displacement against its own time, with the
-    limit its rule applied (raised to the round-off floor of the search's start state as
-    :func:`fdem.workflow.stages.run_stage` raises it)."""
+    limit each trial's rule applied (one line where they agree; a gravity search's trials,
+    whose floor falls as ``1 / k``, each draw their own) and the hold in the trials' time."""
     from fdem.io.pictures import trial_histories_plot
 
     curves = trial_curves(result)
     if not curves:
         return None
-    conv, limit = trial.converge, None
-    if conv is not None and conv.unbalanced_ratio is not None:
-        limit = conv.unbalanced_ratio
-        if conv.roundoff_factor is not None:
-            from fdem.solve.geostatic import unbalanced_ratio_floor
-
-            try:
-                limit = max(limit, conv.roundoff_factor * unbalanced_ratio_floor(sim))
-            except ValueError:  # no gravity and no load: the bare limit
-                pass
-    return trial_histories_plot(path, curves, limit=limit, hold=conv.hold_for if conv is not None else 0.0,
+    limits = {c["limit"] for c in curves}
+    limit = limits.pop() if len(limits) == 1 else None
+    if limit is not None:
+        for c in curves:
+            c.pop("limit")
+    stretch = result.trials[0].result.period_stretch   # density-scaled trials hold in the scaled time
+    hold = trial.converge.hold_for * stretch if trial.converge is not None else 0.0
+    return trial_histories_plot(path, curves, limit=limit, hold=hold,
                                 trigger="F" if result.trigger == "strength reduction" else "k")
 
 

@@ -281,6 +281,10 @@ class StageResult:
     """Wall seconds of the stage spent on output frames, history rows and checkpoints
     (``Simulation.output_seconds``), against ``wall_seconds`` in all."""
     measured_critical_dt: float | None = None
+    ratio_limit: float | None = None
+    """The unbalanced-ratio limit the stage's rule applied: its ``unbalanced_ratio``, raised to
+    ``roundoff_factor`` times the round-off floor at the stage's start where that is higher
+    (``None`` without a ratio rule; stages recorded before it was kept read ``None`` too)."""
 
     @property
     def converged(self) -> bool:
@@ -707,7 +711,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         max_displacement=_max_norm(sim.state.x - x_start, nodes),
         n_broken=int(cracks.broken.sum()) if cracks is not None else 0,
         detail=status["detail"] + (f"; {status['probe_note']}" if status.get("probe_note") else "") + _probes_note(status),
-        period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured)
+        period_stretch=stretch, output_seconds=output_so_far(), measured_critical_dt=measured,
+        ratio_limit=None if status["limit"] is None else float(status["limit"]))
     if journal is not None:
         # a stage that ran to its cap keeps its runtime, so that it can be carried on to a longer one
         capped = None
