@@ -51,6 +51,19 @@ def floors(angle: str, spacing: str, size: float, joint_offset: float | None) ->
         out["floors"][name] = {"origin_m": origin.tolist(), "floor": unbalanced_ratio_floor(sim),
                                "largest_coordinate_m": float(np.abs(sim.state.x).max())}
     sim.state.x[:] = x
+    # whose stiffness the floor is: the triangles' against each force provider's (crack
+    # elements, contact), at the positions as built; a state that kept the displacement apart
+    # for the crack elements alone would remove their share
+    from fdem.solve.density_scaling import triangle_nodal_stiffness
+
+    eps = np.spacing(np.abs(x)).max(axis=1)
+    weight = float(sim.state.mass.sum() * np.linalg.norm(sim.gravity))
+    shares = {"triangles": float(triangle_nodal_stiffness(sim.model) @ eps) / weight}
+    for p in sim.providers:
+        fn = getattr(p, "nodal_stiffness", None)
+        if fn is not None:
+            shares[type(p).__name__] = float(np.asarray(fn(sim.state.mass), float) @ eps) / weight
+    out["floor_by_source"] = shares
     out["wall_s"] = time.perf_counter() - t0
     sim.close()
     return out
@@ -79,6 +92,7 @@ def main(argv=None) -> dict:
         for name, f in r["floors"].items():
             print(f"  origin at {name:20s} largest |x| {f['largest_coordinate_m']:6.1f} m  floor {f['floor']:.3g}"
                   f"  (x{f['floor'] / base:.2f}; limit 10 x floor {10 * f['floor']:.3g})")
+        print("  floor by source (origin as built): " + ", ".join(f"{k} {v:.3g}" for k, v in r["floor_by_source"].items()))
     records[label] = {"command": "python cases/benchmarks/roundoff_floor_origin.py " + " ".join(argv or __import__("sys").argv[1:]),
                       "machine": platform.processor() or platform.machine(), "rows": rows}
     OUT.parent.mkdir(parents=True, exist_ok=True)
