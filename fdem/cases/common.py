@@ -52,7 +52,7 @@ from fdem.solve.simulation import set_default_backend
 
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
-           "prepare_run", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
+           "prepare_run", "other_writer", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
            "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report",
            "add_write_scene_option", "write_case_scene", "add_number_options"]
 
@@ -310,12 +310,32 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
         record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
                       resumed_with=again, resumed_at=_now())
         record["resumed_sources"] = record.get("resumed_sources", []) + [_source()]
+        note = other_writer(record)
+        if note:
+            warn(f"--resume {folder}: {note}")
         args.run_record = record
     else:
         args.run_record = {"case": name, "argv": [a for a in argv if a != "--overwrite"]}
     if open_now:
         open_run(parser, args, name)
     return args
+
+
+def other_writer(record: dict) -> str | None:
+    """What to tell a resume whose code is not the commit that wrote the run's checkpoint (the
+    last of ``record["resumed_sources"]`` against the one before it, or the run's ``source``),
+    or ``None`` when both are the same commit or either is unknown. A commit that changed what
+    a checkpoint holds (a search's key, a stage's runtime) refuses it or, worse, reads it as
+    another run's; the run's own commit is named so that a pinned checkout of it can go on."""
+    sources = record.get("resumed_sources") or []
+    if not sources:
+        return None
+    now = (sources[-1] or {}).get("commit")
+    wrote = ((sources[-2] if len(sources) > 1 else record.get("source")) or {}).get("commit")
+    if not now or not wrote or now == wrote:
+        return None
+    return (f"this is commit {now[:10]}, the checkpoint was written by {wrote[:10]}; if the code between them "
+            f"changed what a checkpoint holds, resume from a checkout of {wrote[:10]} (PYTHONPATH=<checkout>)")
 
 
 def open_run(parser: argparse.ArgumentParser | None, args, name: str) -> None:

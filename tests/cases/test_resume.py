@@ -441,3 +441,18 @@ def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_fini
     assert calls == [] and done["outcome"] == "finished"
     assert (tmp_path / "slide" / muliashi.SEARCH_CHECKPOINT).stat().st_mtime_ns == searched  # not written again
     assert done["critical_gravity_factor"]["bracket"] == whole["bracket"]
+
+
+def test_a_resume_by_another_commit_names_the_one_that_wrote_the_checkpoint():
+    """A resume by a commit other than the one that wrote the checkpoint (the run's start, or
+    its last resume) is told which one that was: a commit that changed what a checkpoint holds
+    refuses it or reads it wrongly, and a pinned checkout of the writer goes on with it."""
+    from fdem.cases.common import other_writer
+
+    a, b = {"commit": "a" * 40}, {"commit": "b" * 40}
+    assert other_writer({"source": a, "resumed_sources": [a]}) is None
+    note = other_writer({"source": a, "resumed_sources": [b]})
+    assert "this is commit bbbbbbbbbb" in note and "written by aaaaaaaaaa" in note
+    assert other_writer({"source": a, "resumed_sources": [b, b]}) is None     # b wrote it last
+    assert "written by bbbbbbbbbb" in other_writer({"source": a, "resumed_sources": [b, a]})
+    assert other_writer({"source": {"commit": None}, "resumed_sources": [b]}) is None   # an installed package
