@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from fdem.solve.damping import Damping
 from fdem.solve.simulation import Simulation
-from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, response_time, run_stage
+from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, ratio_limit, response_time, run_stage
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
@@ -380,6 +380,14 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if trial.converge is None and judge is None:
         raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
                          "or a judge of its end state")
+    rule = trial.converge
+    if judge is None and rule is not None and rule.unbalanced_ratio is not None and not rule.hold_for:
+        limit = ratio_limit(sim, rule)
+        if limit > rule.unbalanced_ratio:  # told once, before the first trial: the verdicts depend on it
+            warn(f"factor of safety: the ratio limit {rule.unbalanced_ratio:.3g} is raised to {limit:.3g}, "
+                 f"{rule.roundoff_factor:g} times this model's round-off floor; taken at its first check a raised "
+                 f"limit can pass a trial that still creeps (docs/cases.md A: the low-angle coarse slope at 1.0 m), "
+                 f"and a hold for a response time (--equilibrium-hold 1, scene key equilibrium_hold) does not")
     cracks = sim.cracks
     trials: list[Trial] = []
     first_fail: dict = {}
@@ -390,7 +398,6 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
 
     search = {"lower": float(lower), "upper": float(upper), "tol": float(tol), "trigger": trigger.name,
               "trial": trial.name, "max_time": trial.max_time}
-    rule = trial.converge
     if rule is not None and rule.unbalanced_ratio not in (None, 1e-4):  # a trial judged by another rule is
         search["ratio"] = rule.unbalanced_ratio                          # another search; the default keeps
     if rule is not None and rule.hold_for:                              # the keys of checkpoints written before

@@ -37,7 +37,7 @@ from fdem.io.messages import warn
 from fdem.solve.damping import NO_DAMPING, Damping
 from fdem.solve.simulation import STOP, Simulation
 
-__all__ = ["Convergence", "Failure", "Stage", "StageResult", "STEP_FROM", "response_time", "run_stage"]
+__all__ = ["Convergence", "Failure", "Stage", "StageResult", "STEP_FROM", "response_time", "ratio_limit", "run_stage"]
 
 
 STEP_FROM = ("bound", "measured")
@@ -309,6 +309,22 @@ def response_time(model) -> float:
     return 4.0 * height / cs
 
 
+def ratio_limit(sim: Simulation, conv: Convergence | None) -> float | None:
+    """The unbalanced-ratio limit ``conv`` applies to ``sim`` in its present state:
+    ``max(unbalanced_ratio, roundoff_factor * R_eps)`` with ``R_eps`` the round-off floor
+    (:func:`fdem.solve.geostatic.unbalanced_ratio_floor`); ``None`` without a ratio rule. A stage
+    takes it once, at its start."""
+    if conv is None or conv.unbalanced_ratio is None:
+        return None
+    from fdem.solve.geostatic import unbalanced_ratio_floor
+
+    try:
+        floor = unbalanced_ratio_floor(sim) if conv.roundoff_factor is not None else 0.0
+    except ValueError:  # no gravity and no load: the ratio itself says so at the first check
+        floor = 0.0
+    return max(conv.unbalanced_ratio, conv.roundoff_factor * floor) if floor > 0.0 else conv.unbalanced_ratio
+
+
 def _monitor_nodes(sim: Simulation, monitor) -> np.ndarray | None:
     if monitor is None:
         return None
@@ -453,7 +469,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     the history steps the uninterrupted run took; a running stage writes periodic checkpoints on
     history rows and one when interrupted, and the journal writes one when it ends.
     """
-    from fdem.solve.geostatic import unbalanced_force_ratio, unbalanced_ratio_floor
+    from fdem.solve.geostatic import unbalanced_force_ratio
 
     kind, saved = journal.next_stage(stage.name) if journal is not None else ("fresh", None)
     if kind == "done":  # finished before the checkpoint: its effects are in the restored state
@@ -540,15 +556,7 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
     if probe_note:  # kept with the stage, so that a resumed stage still says why it stepped from the bounds
         status["probe_note"] = probe_note
     if "limit" not in status:  # the ratio limit, raised to the round-off floor once per stage (kept on resume)
-        status["limit"] = None
-        if conv is not None and conv.unbalanced_ratio is not None:
-            status["limit"] = conv.unbalanced_ratio
-            try:
-                floor = unbalanced_ratio_floor(sim) if conv.roundoff_factor is not None else 0.0
-            except ValueError:  # no gravity and no load: the ratio itself says so at the first check
-                floor = 0.0
-            if floor > 0.0:
-                status["limit"] = max(conv.unbalanced_ratio, conv.roundoff_factor * floor)
+        status["limit"] = ratio_limit(sim, conv)
 
     x0 = sim.model.topology.x0
     box = (x0[:, 0].min(), x0[:, 0].max(), x0[:, 1].min())

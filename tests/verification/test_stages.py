@@ -296,6 +296,34 @@ def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monke
     sim.close()
 
 
+def test_a_search_judged_by_a_raised_limit_at_its_first_check_is_told_so(monkeypatch, capsys):
+    """A search whose ratio limit the model's round-off floor raises, taken at its first check,
+    is warned once before its first trial (such a limit passed a creeping trial on the low-angle
+    coarse slope at 1.0 m); the limit named is the one every trial then applies
+    (:func:`fdem.workflow.stages.ratio_limit`), and a held rule is not warned."""
+    import dataclasses
+
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.fos import factor_of_safety
+    from fdem.workflow.stages import ratio_limit
+
+    def no_trial(*args, **kwargs):
+        raise RuntimeError("no trial needed")
+
+    monkeypatch.setattr(fos_module, "_run_trial", no_trial)
+    sim = planar_slope_scene().sim
+    rule = Convergence(unbalanced_ratio=1e-4, roundoff_factor=1e6)   # raised on any model
+    limit = ratio_limit(sim, rule)
+    assert limit > 1e-4
+    for hold, told in ((0.0, True), (0.1, False)):
+        trial = Stage("trial", max_time=1.0, converge=dataclasses.replace(rule, hold_for=hold), fail=Failure())
+        with pytest.raises(RuntimeError, match="no trial needed"):
+            factor_of_safety(sim, lower=1.0, upper=1.8, tol=0.4, trial=trial)
+        out = capsys.readouterr().out
+        assert (f"raised to {limit:.3g}" in out) is told, out
+    sim.close()
+
+
 def test_gravity_increase_books_its_work_and_finds_the_critical_gravity_factor():
     """Planar block, c = 20 kPa, phi = 30 deg on a 35 deg plane: limit equilibrium fails when
     gravity is k times larger with k = c A / (W (sin psi_p - cos psi_p tan phi)) (the
