@@ -310,9 +310,6 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
         record.update(status="running", outcome="running", resumed=record.get("resumed", 0) + 1,
                       resumed_with=again, resumed_at=_now())
         record["resumed_sources"] = record.get("resumed_sources", []) + [_source()]
-        note = other_writer(record)
-        if note:
-            warn(f"--resume {folder}: {note}")
         args.run_record = record
     else:
         args.run_record = {"case": name, "argv": [a for a in argv if a != "--overwrite"]}
@@ -321,17 +318,14 @@ def prepare_run(parser: argparse.ArgumentParser, args, argv, name: str, open_now
     return args
 
 
-def other_writer(record: dict) -> str | None:
-    """What to tell a resume whose code is not the commit that wrote the run's checkpoint (the
-    last of ``record["resumed_sources"]`` against the one before it, or the run's ``source``),
-    or ``None`` when both are the same commit or either is unknown. A commit that changed what
-    a checkpoint holds (a search's key, a stage's runtime) refuses it or, worse, reads it as
-    another run's; the run's own commit is named so that a pinned checkout of it can go on."""
-    sources = record.get("resumed_sources") or []
-    if not sources:
-        return None
-    now = (sources[-1] or {}).get("commit")
-    wrote = ((sources[-2] if len(sources) > 1 else record.get("source")) or {}).get("commit")
+def other_writer(wrote: dict | None, now: dict | None) -> str | None:
+    """What to tell a resume whose code (``now``, :func:`_source`) is not the commit that wrote
+    the checkpoint (``wrote``, the source the checkpoint itself names:
+    :attr:`fdem.workflow.journal.RunJournal.written_by`), or ``None`` when both are the same
+    commit or either is unknown (a checkpoint written before it named its writer, an installed
+    package). A commit that changed what a checkpoint holds (a search's key, a stage's runtime)
+    refuses it or reads it wrongly; the writer is named so that a pinned checkout of it can go on."""
+    now, wrote = (now or {}).get("commit"), (wrote or {}).get("commit")
     if not now or not wrote or now == wrote:
         return None
     return (f"this is commit {now[:10]}, the checkpoint was written by {wrote[:10]}; if the code between them "
@@ -565,8 +559,13 @@ def start_journal(sim, args, folder=None):
     every = getattr(args, "checkpoint_every", None) or None
     path = Path(folder if folder is not None else args.out) / CHECKPOINT_NAME
     sim.dt_fraction = getattr(args, "dt_fraction", sim.dt_fraction)
+    source = _source()
     if getattr(args, "resume", None) is not None and path.is_file():
         journal = RunJournal.resume_from(sim, path, every)
+        journal.writer = source
+        note = other_writer(journal.written_by, source)
+        if note:
+            warn(f"--resume {path.parent}: {note}")
         if getattr(args, "carry_on", False):  # checked against summary.json by prepare_run
             from fdem.solve.checkpoint import read_checkpoint
 
@@ -583,7 +582,9 @@ def start_journal(sim, args, folder=None):
         say(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
               f"{len(journal.done)} stage(s) done" + (f", {journal.resume['name']} in progress" if journal.resume else ""))
         return journal
-    return RunJournal(path, every)
+    journal = RunJournal(path, every)
+    journal.writer = source   # each checkpoint names the code that wrote it, for a resume to compare
+    return journal
 
 
 def save_final_state(sim, out, outcome: str) -> Path | None:

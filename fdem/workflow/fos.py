@@ -381,13 +381,6 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
                          "or a judge of its end state")
     rule = trial.converge
-    if judge is None and rule is not None and rule.unbalanced_ratio is not None and not rule.hold_for:
-        limit = ratio_limit(sim, rule)
-        if limit > rule.unbalanced_ratio:  # told once, before the first trial: the verdicts depend on it
-            warn(f"factor of safety: the ratio limit {rule.unbalanced_ratio:.3g} is raised to {limit:.3g}, "
-                 f"{rule.roundoff_factor:g} times this model's round-off floor; taken at its first check a raised "
-                 f"limit can pass a trial that still creeps (docs/cases.md A: the low-angle coarse slope at 1.0 m), "
-                 f"and a hold for a response time (--equilibrium-hold 1, scene key equilibrium_hold) does not")
     cracks = sim.cracks
     trials: list[Trial] = []
     first_fail: dict = {}
@@ -442,6 +435,8 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             save_checkpoint(sim, start_file)
     start_factor = trigger.current(sim)
     start = snapshot(sim)
+    if judge is None and trigger.name == "strength reduction":
+        _tell_raised_limit(sim, rule)
     replayed = {float(d["factor"]): d for d in progress["trials"]} if progress else {}
     replayed_wall = 0.0
 
@@ -582,11 +577,27 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         try:
             if result.failure_positions is not None and cracks is not None:
                 _failure_picture(out / "fos_failure.png", sim, cracks, result)
-            _trials_picture(out / "fos_trials.png", result, trial)
+            _trials_picture(out / "fos_trials.png", sim, result, trial)
         except Exception as err:  # noqa: BLE001 - any picture failure; the result is what matters
             warn(f"factor of safety: a picture of the search could not be drawn ({type(err).__name__}: {err}); "
                  f"the result is in {out / 'fos.json'}")
     return result
+
+
+def _tell_raised_limit(sim: Simulation, rule: Convergence | None) -> None:
+    """Warn, once before a strength-reduction search's first trial (on its start state, which
+    every trial's floor is taken from), when the model's round-off floor raises the ratio limit
+    and the rule takes it at its first check. (A gravity search's trials each take the floor of
+    their own gravity, ``1 / k`` of it: no one limit to name.)"""
+    if rule is None or rule.unbalanced_ratio is None or rule.hold_for:
+        return
+    limit = ratio_limit(sim, rule)
+    if limit > rule.unbalanced_ratio:
+        warn(f"factor of safety: the ratio limit {rule.unbalanced_ratio:.3g} is raised to {limit:.3g}, "
+             f"{rule.roundoff_factor:g} times this model's round-off floor; taken at its first check a raised "
+             f"limit can pass a trial that still creeps (docs/cases.md A: the low-angle coarse slope at 1.0 m), "
+             f"and one held for a response time does not (SlopeWorkflow and scene key equilibrium_hold = 1, "
+             f"fdem run four-slopes --equilibrium-hold 1)")
 
 
 def trial_curves(result: FoSResult) -> list[dict]:
@@ -608,7 +619,7 @@ def trial_curves(result: FoSResult) -> list[dict]:
     return curves
 
 
-def _trials_picture(path: Path, result: FoSResult, trial: Stage) -> Path | None:
+def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:
     """``fos_trials.png``: every trial's ratio and displacement against its own time, with the
     limit each trial's rule applied (one line where they agree; a gravity search's trials,
     whose floor falls as ``1 / k``, each draw their own) and the hold in the trials' time."""
@@ -617,7 +628,9 @@ def _trials_picture(path: Path, result: FoSResult, trial: Stage) -> Path | None:
     curves = trial_curves(result)
     if not curves:
         return None
-    limits = {c["limit"] for c in curves}
+    limits = {c["limit"] for c in curves} - {None}   # None: a trial replayed from before limits were kept
+    if not limits:   # all such: the limit the rule takes on the search's start state (sim is back in it)
+        limits = {ratio_limit(sim, trial.converge)}
     limit = limits.pop() if len(limits) == 1 else None
     if limit is not None:
         for c in curves:

@@ -59,6 +59,8 @@ class RunJournal:
         self.resume: dict | None = None   # runtime of the stage to continue, from the checkpoint
         self.current: Callable[[], dict] | None = None   # runtime of the stage now running
         self.writes: list[tuple[str, int]] = []   # (why, simulation step) of every checkpoint written
+        self.writer: dict | None = None   # the code writing the checkpoints (fdem.cases.common._source), kept in them
+        self.written_by: dict | None = None   # the code that wrote the checkpoint this journal resumed from
         self._calls = 0
         self._last_write = time.monotonic()
 
@@ -174,6 +176,8 @@ class RunJournal:
         # it would start that stage afresh
         context = {"journal": 1, "done": self.done, "marks": self.marks,
                    "stage": self.current() if self.current is not None else self.resume, "why": why}
+        if self.writer is not None:
+            context["writer"] = self.writer
         t0 = time.perf_counter()
         save_checkpoint(sim, self.path, context=context)
         # the interval runs from the end of the write: a write slower than the interval (a large
@@ -203,4 +207,5 @@ class RunJournal:
         journal.done = [dict(r) for r in context["done"]]
         journal.marks = dict(context["marks"])
         journal.resume = context["stage"]
+        journal.written_by = context.get("writer")
         return journal

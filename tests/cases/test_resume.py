@@ -443,16 +443,32 @@ def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_fini
     assert done["critical_gravity_factor"]["bracket"] == whole["bracket"]
 
 
-def test_a_resume_by_another_commit_names_the_one_that_wrote_the_checkpoint():
-    """A resume by a commit other than the one that wrote the checkpoint (the run's start, or
-    its last resume) is told which one that was: a commit that changed what a checkpoint holds
-    refuses it or reads it wrongly, and a pinned checkout of the writer goes on with it."""
+def test_a_resume_by_another_commit_names_the_one_that_wrote_the_checkpoint(tmp_path):
+    """Each checkpoint names the code that wrote it, and a resume by another commit is told
+    which one that was (not the commit of an earlier resume that was refused before it wrote
+    anything): a commit that changed what a checkpoint holds refuses it or reads it wrongly,
+    and a pinned checkout of the writer goes on with it."""
     from fdem.cases.common import other_writer
+    from fdem.mesh.mesh import structured_rectangle
+    from fdem.mesh.topology import build_topology
+    from fdem.physics.elastic import ElasticMaterial
+    from fdem.solve.model import Model
+    from fdem.solve.simulation import Simulation
+    from fdem.workflow.journal import RunJournal
+
+    def simulation():
+        model = Model(build_topology(structured_rectangle(2, 2, 1.0, 1.0)),
+                      ElasticMaterial(young=1e8, poisson=0.25, density=2500.0))
+        return Simulation(model, progress=False)
 
     a, b = {"commit": "a" * 40}, {"commit": "b" * 40}
-    assert other_writer({"source": a, "resumed_sources": [a]}) is None
-    note = other_writer({"source": a, "resumed_sources": [b]})
+    journal = RunJournal(tmp_path / "checkpoint.npz")
+    journal.writer = a
+    journal.write(simulation(), "written by a")
+    resumed = RunJournal.resume_from(simulation(), tmp_path / "checkpoint.npz")
+    assert resumed.written_by == a
+    note = other_writer(resumed.written_by, b)
     assert "this is commit bbbbbbbbbb" in note and "written by aaaaaaaaaa" in note
-    assert other_writer({"source": a, "resumed_sources": [b, b]}) is None     # b wrote it last
-    assert "written by bbbbbbbbbb" in other_writer({"source": a, "resumed_sources": [b, a]})
-    assert other_writer({"source": {"commit": None}, "resumed_sources": [b]}) is None   # an installed package
+    assert other_writer(resumed.written_by, a) is None
+    assert other_writer(None, b) is None                  # a checkpoint written before it named its writer
+    assert other_writer(a, {"commit": None}) is None      # an installed package

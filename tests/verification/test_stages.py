@@ -297,10 +297,11 @@ def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monke
 
 
 def test_a_search_judged_by_a_raised_limit_at_its_first_check_is_told_so(monkeypatch, capsys):
-    """A search whose ratio limit the model's round-off floor raises, taken at its first check,
-    is warned once before its first trial (such a limit passed a creeping trial on the low-angle
-    coarse slope at 1.0 m); the limit named is the one every trial then applies
-    (:func:`fdem.workflow.stages.ratio_limit`), and a held rule is not warned."""
+    """A strength-reduction search whose ratio limit the model's round-off floor raises, taken at
+    its first check, is warned once before its first trial (such a limit passed a creeping trial
+    on the low-angle coarse slope at 1.0 m); the limit named is the one its trials apply (the
+    floor of the start state, :func:`fdem.workflow.stages.ratio_limit`), and a held rule is not
+    warned."""
     import dataclasses
 
     from fdem.workflow import fos as fos_module
