@@ -22,6 +22,7 @@ import numpy as np
 
 from fdem.io.history import read_history
 from fdem.io.pictures import trial_histories_plot
+from fdem.workflow.fos import trial_curve
 
 
 def option(argv: list[str], flag: str, default: float) -> float:
@@ -42,11 +43,9 @@ def curves_of(run: Path) -> tuple[list[dict], float, str]:
     curves = []
     for t in fos["trials"]:
         rows = stage == t["name"]
-        if not rows.any():
-            continue
-        time, disp = history["time"][rows], history["max_displacement"][rows]
-        curves.append({"factor": t["factor"], "stable": t["stable"], "time": time - time[0],
-                       "ratio": history["unbalanced_ratio"][rows], "displacement": disp - disp[0]})
+        if rows.any():  # the same curve a search draws of its own trials
+            curves.append(trial_curve(t["factor"], t["stable"], history["time"][rows],
+                                      history["unbalanced_ratio"][rows], history["max_displacement"][rows]))
     hold = option(argv, "--equilibrium-hold", 0.0)
     size = option(argv, "--size", float("nan"))
     title = (f"{size:g} m: FoS {fos['fos']:.4g} ({fos['bracket'][0]:.4g}-{fos['bracket'][1]:.4g}), limit {limit:.3g}"

@@ -27,7 +27,7 @@ from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, ratio
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
-           "TRIALS_MARK", "START_NAME", "trial_curves"]
+           "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -609,14 +609,20 @@ def trial_curves(result: FoSResult) -> list[dict]:
     curves = []
     for t in result.trials:
         rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
-        if not rows:
-            continue
-        time = np.array([float(r["time"]) for r in rows])
-        disp = np.array([float(r["max_displacement"]) for r in rows])
-        curves.append({"factor": t.factor, "stable": t.stable, "time": time - time[0],
-                       "ratio": np.array([float(r["unbalanced_ratio"]) for r in rows]), "displacement": disp - disp[0],
-                       "limit": t.result.ratio_limit})
+        if rows:
+            curves.append(trial_curve(t.factor, t.stable, [float(r["time"]) for r in rows],
+                                      [float(r["unbalanced_ratio"]) for r in rows],
+                                      [float(r["max_displacement"]) for r in rows], t.result.ratio_limit))
     return curves
+
+
+def trial_curve(factor: float, stable: bool, time, ratio, max_displacement, limit: float | None = None) -> dict:
+    """One trial's curve for :func:`fdem.io.pictures.trial_histories_plot` from its history
+    columns ``time`` [s], ``unbalanced_ratio`` and ``max_displacement`` [m] (from the reference
+    state): time and displacement taken from the trial's first row."""
+    time, disp = np.asarray(time, float), np.asarray(max_displacement, float)
+    return {"factor": factor, "stable": stable, "time": time - time[0], "ratio": np.asarray(ratio, float),
+            "displacement": disp - disp[0], "limit": limit}
 
 
 def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:
