@@ -506,7 +506,7 @@ def long_run(n_steps: int = 1_000_000) -> dict:
     cracks = CrackSet(topo, {0: glue(E, 10.0)})
     sim = Simulation(model, providers=[cracks], progress=False)
     H = np.array([[2e-3, 1e-3], [-5e-4, -1e-3]])
-    sim.state.x[:] = topo.x0 + (topo.x0 - 0.5) @ H.T
+    sim.set_positions(topo.x0 + (topo.x0 - 0.5) @ H.T)
     sim.run(n_steps=n_steps, history_every=n_steps // 100, output_every=10**9)
     tot = np.array([r["total"] for r in sim.history])
     held = max(r["kinetic"] + r["strain"] + r["crack_elastic"] for r in sim.history)

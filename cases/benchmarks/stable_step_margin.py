@@ -116,7 +116,7 @@ def omega_with_tangential_springs(sim, iterations: int = 400, rtol: float = 1e-6
         sim.load_state_dict(saved)
         v = np.zeros_like(saved["x"]) if u is None else u / sim.dt
         if u is not None:
-            sim.state.x[:] += u
+            sim.set_positions(displace=u)
         sim.state.v[:] = v
         sim.step()
         return (sim.state.v - v) / sim.dt

@@ -189,7 +189,7 @@ def energy_drift():
     model = Model.from_mesh(_jittered(6, 6, 2.0, 2.0, seed=7), ElasticMaterial(E_S, NU_S, RHO_S), exploded=False)
     sim = Simulation(model, progress=False)
     H = np.array([[2e-3, 1e-3], [-5e-4, -1e-3]])
-    sim.state.x[:] = model.topology.x0 + (model.topology.x0 - 1.0) @ H.T
+    sim.set_positions(model.topology.x0 + (model.topology.x0 - 1.0) @ H.T)
     sim.run(n_steps=20_000, history_every=500)
     total = np.array([r["total"] for r in sim.history])
     drift = float(np.max(np.abs(total - total[0])) / abs(total[0]))

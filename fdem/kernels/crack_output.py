@@ -17,9 +17,9 @@ __all__ = ["crack_tractions"]
 
 
 @njit(cache=True, parallel=True)
-def crack_tractions(x, nodes, const, status, state, offset, dil, broken, out):
+def crack_tractions(u, ref, nodes, const, status, state, offset, dil, broken, out):
     """``out[c] = [sigma_0, tau_0, sigma_1, tau_1]``: normal and shear force per end [N/m per
-    end] of element ``c`` (internal order) at positions ``x``, as :func:`point_law` gives them
+    end] of element ``c`` (internal order) at the nodes' displacements ``u`` (reference rows ``ref``), as :func:`point_law` gives them
     with the constants carrying the end weight ``w = L0/2`` (divide by ``w`` for tractions [Pa]).
 
     Normal: tension positive, compression negative; shear: the force resisting the slip ``s``
@@ -32,7 +32,7 @@ def crack_tractions(x, nodes, const, status, state, offset, dil, broken, out):
             for k in range(4):
                 out[c, k] = 0.0
             continue
-        o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
+        o0, s0, o1, s1 = end_separations(c, u, ref, nodes, offset)
         signed_inv_dO = const[c, CC_INV_DO]
         kind = LINEAR if signed_inv_dO < 0.0 else MUNJIZA
         inelastic = status[c] != 0

@@ -54,6 +54,16 @@ Layout (``n`` crack elements, ``m`` exploded nodes)
     0 and end 1. Zero by default; a geostatic start pre-loads the elements through them (the
     law then gives the equilibrium traction at zero separation), as the triangles' initial
     stress pre-loads the triangles.
+``ref : (n, N_REF) float64``
+    ``[a_x, a_y, d0_x, d0_y, d1_x, d1_y]`` (columns ``CR_*``): the element's geometry at the
+    reference positions ``X``: face A ``a = X_1 - X_0``, and the separations of end 0,
+    ``X_3 - X_0``, and of end 1, ``X_2 - X_1`` (zero when the element joins coincident nodes, as
+    every element inserted between the triangles of a mesh does). The kernels read the nodes'
+    displacement ``u = x - X``, never their positions: the separation ``d0 + u_3 - u_0`` is then
+    resolved to the spacing of floating-point numbers at the size of ``u`` (1e-18 m for
+    centimetres), not at the size of ``x`` (1e-14 to 3e-14 m at 100 m from the origin), and the
+    stiff penalty springs turn no coordinate round-off into force (docs/benchmarks.md, "The
+    floor and the origin").
 ``fe : (n, N_FE) float64``
     ``[F0x, F0y, F1x, F1y]`` (columns ``CF_*``): force on the A node of end 0 and of end 1
     [N/m], the per-element store of the store-and-gather scheme.
@@ -76,7 +86,8 @@ __all__ = ["EM_A", "EM_B", "EM_C", "MUNJIZA", "LINEAR", "N_CONST", "N_STATE", "N
            "CS_D0", "CS_KAP0", "CS_SPL0", "CS_D1", "CS_KAP1", "CS_SPL1", "CS_END", "CS_TAU0", "CS_TAU1",
            "CS_SIG0", "CS_SIG1", "CS_DIL0", "CS_DIL1", "CD_TANPSI", "CD_ULIM",
            "CW_MODE_I", "CW_MODE_II", "CW_FRICTION", "N_DISS", "CO_O0", "CO_S0", "CO_O1", "CO_S1", "CO_END",
-           "N_OFFSET", "CF_F0X", "CF_F0Y", "CF_F1X", "CF_F1Y", "CF_END", "N_FE",
+           "N_OFFSET", "CR_AX", "CR_AY", "CR_D0X", "CR_D0Y", "CR_D1X", "CR_D1Y", "N_REF", "reference_geometry",
+           "element_kinematics", "CF_F0X", "CF_F0Y", "CF_F1X", "CF_F1Y", "CF_END", "N_FE",
            "UNKNOWN_TRACTION", "PARALLEL_MIN", "softening", "point_law", "element_update",
            "update_and_scatter", "crack_forces_coloured", "crack_forces_serial", "crack_forces_store",
            "gather_node_forces", "colour_elements", "end_separations", "crack_elastic_energy",
@@ -154,6 +165,15 @@ CO_O1 = 2  # opening offset of end 1 [m]
 CO_S1 = 3  # slip offset of end 1 [m]
 CO_END = 2  # column stride of [o, s] from end 0 to end 1
 N_OFFSET = 4
+
+
+CR_AX = 0  # face A at the reference, X_1 - X_0 [m]
+CR_AY = 1
+CR_D0X = 2  # separation of end 0 at the reference, X_3 - X_0 [m]
+CR_D0Y = 3
+CR_D1X = 4  # separation of end 1 at the reference, X_2 - X_1 [m]
+CR_D1Y = 5
+N_REF = 6
 
 
 # Columns of ``fe`` (store-and-gather: force on the A node of each end; the B node gets minus it).
@@ -349,15 +369,71 @@ def _point_law_inelastic(o, D, kap, sp, d, tp, sigp, ttr, Kn, Kt, op, C, tanphi,
     return sig, tau, Dn, kap + dk, sp + sgn * dk, d + dd, dWI, dWII, dWf
 
 
-@njit(cache=True, fastmath=True, inline="always")
-def element_update(c, x, nodes, const, status, state, diss, offset, dil):
-    """One crack element: kinematics, the law at both ends, state update.
+def reference_geometry(x0, nodes):
+    """(n, N_REF) ``ref`` rows of the elements ``nodes`` at the reference positions ``x0``:
+    face A ``X_1 - X_0`` and the separations ``X_3 - X_0``, ``X_2 - X_1`` (see the layout)."""
+    x0 = np.asarray(x0, dtype=np.float64)
+    nodes = np.asarray(nodes)
+    ref = np.empty((nodes.shape[0], N_REF))
+    ref[:, CR_AX:CR_AY + 1] = x0[nodes[:, 1]] - x0[nodes[:, 0]]
+    ref[:, CR_D0X:CR_D0Y + 1] = x0[nodes[:, 3]] - x0[nodes[:, 0]]
+    ref[:, CR_D1X:CR_D1Y + 1] = x0[nodes[:, 2]] - x0[nodes[:, 1]]
+    return ref
 
-    Tangent ``t`` along the mid-line of the two faces, ``t = (m1 - m0)/|m1 - m0|`` with
-    ``m0 = (x0 + x3)/2``, ``m1 = (x1 + x2)/2``; normal ``n = (t_y, -t_x)`` (A into B).
-    Separation at end 0: ``d0 = x3 - x0``, end 1: ``d1 = x2 - x1``; ``o = d.n + o_off``,
-    ``s = d.t + s_off`` with the element's separation offsets ``offset[c]``. The dilation
-    constants ``dil[c]`` and the state row are read only when the element leaves the fast path.
+
+@njit(cache=True, fastmath=True, inline="always")
+def element_kinematics(c, u, ref, nodes, offset):
+    """Frame and separations of element ``c`` from its nodes' displacements ``u`` [m].
+
+    With ``x = X + u`` and the reference rows ``ref`` (face A ``a``, end separations ``d0``,
+    ``d1``): face A is ``a + u_1 - u_0``, face B ``x_2 - x_3 = a + d1 - d0 + u_2 - u_3``; the
+    tangent ``t`` runs along the mid-line of the faces, ``m = (A + B)/2``, ``t = m/|m|``, the
+    normal ``n = (t_y, -t_x)`` points from A into B. The separation of end 0 is
+    ``d0 + u_3 - u_0``, of end 1 ``d1 + u_2 - u_1``; ``o = d.n + o_off``, ``s = d.t + s_off``
+    with the element's offsets ``offset[c]``.
+
+    Returns ``(t_x, t_y, o0, s0, o1, s1, fold)``, ``fold = A . B`` [m^2] (<= 0: the faces have
+    turned more than 90 degrees apart).
+    """
+    i0 = nodes[c, 0]
+    i1 = nodes[c, 1]
+    i2 = nodes[c, 2]
+    i3 = nodes[c, 3]
+    u0x = u[i0, 0]
+    u0y = u[i0, 1]
+    u1x = u[i1, 0]
+    u1y = u[i1, 1]
+    u2x = u[i2, 0]
+    u2y = u[i2, 1]
+    u3x = u[i3, 0]
+    u3y = u[i3, 1]
+    d0x = ref[c, CR_D0X] + (u3x - u0x)
+    d0y = ref[c, CR_D0Y] + (u3y - u0y)
+    d1x = ref[c, CR_D1X] + (u2x - u1x)
+    d1y = ref[c, CR_D1Y] + (u2y - u1y)
+    ax = ref[c, CR_AX] + (u1x - u0x)
+    ay = ref[c, CR_AY] + (u1y - u0y)
+    # face B = x_2 - x_3 = face A + d1 - d0
+    bx = ax + d1x - d0x
+    by = ay + d1y - d0y
+    mx = 0.5 * (ax + bx)
+    my = 0.5 * (ay + by)
+    inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
+    tx = mx * inv
+    ty = my * inv
+    # n = (t_y, -t_x)
+    o0 = d0x * ty - d0y * tx + offset[c, CO_O0]
+    s0 = d0x * tx + d0y * ty + offset[c, CO_S0]
+    o1 = d1x * ty - d1y * tx + offset[c, CO_O1]
+    s1 = d1x * tx + d1y * ty + offset[c, CO_S1]
+    return tx, ty, o0, s0, o1, s1, ax * bx + ay * by
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def element_update(c, u, ref, nodes, const, status, state, diss, offset, dil):
+    """One crack element: kinematics (:func:`element_kinematics`, from the nodes'
+    displacements ``u``), the law at both ends, state update. The dilation constants ``dil[c]``
+    and the state row are read only when the element leaves the fast path.
 
     Returns ``(broke, F0x, F0y, F1x, F1y)``: ``F_i = sigma_i n + tau_i t`` [N/m] is the force on
     the A node of end ``i``; the B node gets ``-F_i``. ``broke`` is True when both ends reached
@@ -365,33 +441,9 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
     90 degrees apart (``(x1 - x0) . (x2 - x3) <= 0``: hinged open about one end); forces are then
     zero and the faces belong to contact.
     """
-    i0 = nodes[c, 0]
-    i1 = nodes[c, 1]
-    i2 = nodes[c, 2]
-    i3 = nodes[c, 3]
-    x0 = x[i0, 0]
-    y0 = x[i0, 1]
-    x1 = x[i1, 0]
-    y1 = x[i1, 1]
-    x2 = x[i2, 0]
-    y2 = x[i2, 1]
-    x3 = x[i3, 0]
-    y3 = x[i3, 1]
-    mx = 0.5 * (x1 + x2 - x0 - x3)
-    my = 0.5 * (y1 + y2 - y0 - y3)
-    inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
-    tx = mx * inv
-    ty = my * inv
+    tx, ty, o0, s0, o1, s1, fold = element_kinematics(c, u, ref, nodes, offset)
     nx = ty
     ny = -tx
-    d0x = x3 - x0
-    d0y = y3 - y0
-    d1x = x2 - x1
-    d1y = y2 - y1
-    o0 = d0x * nx + d0y * ny + offset[c, CO_O0]
-    s0 = d0x * tx + d0y * ty + offset[c, CO_S0]
-    o1 = d1x * nx + d1y * ny + offset[c, CO_O1]
-    s1 = d1x * tx + d1y * ty + offset[c, CO_S1]
 
     Kn = const[c, CC_KN]
     Kt = const[c, CC_KT]
@@ -452,7 +504,7 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
         # a frictionless pin, and its mid-line frame degenerates as the fold nears 180 degrees
         # (|m| -> 0 flips n, turning a free opening into a huge closure). It breaks; its
         # faces belong to contact from here on.
-        folded = (x1 - x0) * (x2 - x3) + (y1 - y0) * (y2 - y3) <= 0.0
+        folded = fold <= 0.0
         broke = (Dn0 >= 1.0 and Dn1 >= 1.0) or folded
     keep = 0.0 if broke else 1.0
     F0x = keep * (sig0 * nx + tau0 * tx)
@@ -463,10 +515,10 @@ def element_update(c, x, nodes, const, status, state, diss, offset, dil):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, dil, broke_flag):
+def update_and_scatter(c, u, ref, f, nodes, const, status, state, diss, offset, dil, broke_flag):
     """Update element ``c`` and add its forces to its four nodes (``+F_i`` on the A node of end
     ``i``, ``-F_i`` on the B node). Returns 1 if it broke (and sets ``broke_flag[c]``), else 0."""
-    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
+    broke, F0x, F0y, F1x, F1y = element_update(c, u, ref, nodes, const, status, state, diss, offset, dil)
     i0 = nodes[c, 0]
     i1 = nodes[c, 1]
     i2 = nodes[c, 2]
@@ -486,7 +538,7 @@ def update_and_scatter(c, x, f, nodes, const, status, state, diss, offset, dil, 
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, dil, active, colour_ptr, broke_flag):
+def crack_forces_coloured(u, ref, f, nodes, const, status, state, diss, offset, dil, active, colour_ptr, broke_flag):
     """Add crack forces into ``f`` (n_nodes, 2) [N/m], colour by colour.
 
     ``active`` holds the live element ids grouped by colour, colour ``k`` in
@@ -497,22 +549,22 @@ def crack_forces_coloured(x, f, nodes, const, status, state, diss, offset, dil, 
     nb = 0
     for k in range(colour_ptr.shape[0] - 1):
         for j in prange(colour_ptr[k], colour_ptr[k + 1]):
-            nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, dil, broke_flag)
+            nb += update_and_scatter(active[j], u, ref, f, nodes, const, status, state, diss, offset, dil, broke_flag)
     return nb
 
 
 @njit(cache=True, fastmath=True)
-def crack_forces_serial(x, f, nodes, const, status, state, diss, offset, dil, active, broke_flag):
+def crack_forces_serial(u, ref, f, nodes, const, status, state, diss, offset, dil, active, broke_flag):
     """Serial version of :func:`crack_forces_coloured` for small active sets (no threading
     overhead; any element order is race-free on one thread)."""
     nb = 0
     for j in range(active.shape[0]):
-        nb += update_and_scatter(active[j], x, f, nodes, const, status, state, diss, offset, dil, broke_flag)
+        nb += update_and_scatter(active[j], u, ref, f, nodes, const, status, state, diss, offset, dil, broke_flag)
     return nb
 
 
 @njit(cache=True, parallel=True, fastmath=True)
-def crack_forces_store(x, nodes, const, status, state, diss, offset, dil, active, fe, broke_flag):
+def crack_forces_store(u, ref, nodes, const, status, state, diss, offset, dil, active, fe, broke_flag):
     """Per-element pass of the store-and-gather scheme: ``fe[c] = [F0x, F0y, F1x, F1y]``.
 
     Returns the number of elements that broke (their ``fe`` row is zero from then on).
@@ -520,7 +572,7 @@ def crack_forces_store(x, nodes, const, status, state, diss, offset, dil, active
     nb = 0
     for j in prange(active.shape[0]):
         c = active[j]
-        broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
+        broke, F0x, F0y, F1x, F1y = element_update(c, u, ref, nodes, const, status, state, diss, offset, dil)
         fe[c, CF_F0X] = F0x
         fe[c, CF_F0Y] = F0y
         fe[c, CF_F1X] = F1x
@@ -579,36 +631,22 @@ def colour_elements(crack_triangles, n_tri):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def end_separations(c, x, nodes, offset):
+def end_separations(c, u, ref, nodes, offset):
     """Opening and slip ``(o0, s0, o1, s1)`` [m] of both ends of element ``c``, offsets
-    included, in the frame of :func:`element_update` (tangent along the mid-line of the faces,
-    normal from A into B)."""
-    i0 = nodes[c, 0]
-    i1 = nodes[c, 1]
-    i2 = nodes[c, 2]
-    i3 = nodes[c, 3]
-    mx = 0.5 * (x[i1, 0] + x[i2, 0] - x[i0, 0] - x[i3, 0])
-    my = 0.5 * (x[i1, 1] + x[i2, 1] - x[i0, 1] - x[i3, 1])
-    inv = 1.0 / math.sqrt(max(mx * mx + my * my, 1e-300))
-    tx = mx * inv
-    ty = my * inv
-    d0x = x[i3, 0] - x[i0, 0]
-    d0y = x[i3, 1] - x[i0, 1]
-    d1x = x[i2, 0] - x[i1, 0]
-    d1y = x[i2, 1] - x[i1, 1]
-    return (d0x * ty - d0y * tx + offset[c, CO_O0], d0x * tx + d0y * ty + offset[c, CO_S0],
-            d1x * ty - d1y * tx + offset[c, CO_O1], d1x * tx + d1y * ty + offset[c, CO_S1])
+    included, from the nodes' displacements ``u`` (:func:`element_kinematics`)."""
+    _, _, o0, s0, o1, s1, _ = element_kinematics(c, u, ref, nodes, offset)
+    return o0, s0, o1, s1
 
 
 @njit(cache=True, fastmath=True)
-def crack_elastic_energy(x, nodes, const, state, offset, active):
+def crack_elastic_energy(u, ref, nodes, const, state, offset, active):
     """Elastic energy stored in the live elements [J/m]: per end
     ``sec oe+^2/2 + Kc oe-^2/2 + tau^2/(2 Kt)`` with ``tau = Kt (s - s_pl)`` and the effective
     opening ``oe = o - d`` (``d`` the dilatant opening of the end, 0 without dilation)."""
     e = 0.0
     for j in range(active.shape[0]):
         c = active[j]
-        o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
+        o0, s0, o1, s1 = end_separations(c, u, ref, nodes, offset)
         e += _end_energy(o0, s0, state[c, CS_D0], state[c, CS_SPL0], state[c, CS_DIL0], const[c])
         e += _end_energy(o1, s1, state[c, CS_D1], state[c, CS_SPL1], state[c, CS_DIL1], const[c])
     return e
@@ -706,9 +744,9 @@ def _end_energy(o, s, D, sp, d, const_row):
 
 
 @njit(cache=True, fastmath=True)
-def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, active):
+def project_to_envelope(u, ref, nodes, const, status, state, diss, offset, dil, active):
     """Bring every end whose separation lies outside the (new) strength envelope back onto
-    it at the current positions ``x``, booking the energy this releases exactly.
+    it at the current displacements ``u``, booking the energy this releases exactly.
 
     Called after a strength change: ends beyond the new tensile envelope soften, ends above
     the new shear strength slip plastically, by the law itself (:func:`point_law`) at fixed
@@ -721,7 +759,7 @@ def project_to_envelope(x, nodes, const, status, state, diss, offset, dil, activ
     total = 0.0
     for j in range(active.shape[0]):
         c = active[j]
-        o0, s0, o1, s1 = end_separations(c, x, nodes, offset)
+        o0, s0, o1, s1 = end_separations(c, u, ref, nodes, offset)
         Kn = const[c, CC_KN]
         Kt = const[c, CC_KT]
         op = const[c, CC_OP]

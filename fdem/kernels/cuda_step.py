@@ -72,7 +72,7 @@ def _reduce_block(shared, tid, n_values, sums):
 
 
 @cuda.jit
-def step_kernel(x, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha,
+def step_kernel(x, u, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha,
                 local, use_viscous, ledger, sums):
     """One step of every triangle (:func:`fdem.kernels.stepping.triangle_step`); adds the
     ledger's sums (:data:`fdem.kernels.stepping.LEDGER_FIELDS`) into ``sums`` (13,).
@@ -88,7 +88,7 @@ def step_kernel(x, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_pres
     if t < tc.shape[0]:
         c_keep, c_div = damping_factors(alpha, dt)
         damped = alpha != 0.0 or local != 0.0
-        s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt,
+        s = triangle_step(x, u, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt,
                           alpha, c_keep, c_div, local, damped, use_viscous, ledger)
         for k in range(N_STEP_SUMS):
             shared[tid, k] = s[k]
@@ -96,7 +96,7 @@ def step_kernel(x, v, tc, inertia, f_int, use_int, f_ext, use_ext, flags, v_pres
 
 
 @cuda.jit
-def crack_kernel(x, f, nodes, const, status, state, diss, offset, dil, run, broke_flag, counts):
+def crack_kernel(u, ref, f, nodes, const, status, state, diss, offset, dil, run, broke_flag, counts):
     """Crack elements ``run`` (live element ids): :func:`fdem.kernels.cracks.element_update`,
     forces added into ``f`` with atomics (``+F_i`` on the A node of end ``i``, ``-F_i`` on the B
     node). ``counts[0]`` counts the elements that broke (``broke_flag[c] = 1``), ``counts[1]``
@@ -106,7 +106,7 @@ def crack_kernel(x, f, nodes, const, status, state, diss, offset, dil, run, brok
         return
     c = run[j]
     was_elastic = status[c] == 0
-    broke, F0x, F0y, F1x, F1y = element_update(c, x, nodes, const, status, state, diss, offset, dil)
+    broke, F0x, F0y, F1x, F1y = element_update(c, u, ref, nodes, const, status, state, diss, offset, dil)
     i0 = nodes[c, 0]
     i1 = nodes[c, 1]
     i2 = nodes[c, 2]

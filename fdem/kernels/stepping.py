@@ -88,9 +88,14 @@ def damped_velocity(u, force, mass, inv_mass, dt, alpha, c_keep, c_div, local):
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt, flags, v_prescribed):
+def constrain_and_move(x, u, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt, flags, v_prescribed):
     """Apply node ``i``'s prescribed velocities to its new velocity ``(nx, ny)``, then write
-    ``v[i]`` and ``x[i] = (px, py) + dt v``.
+    ``v[i]``, ``x[i] = (px, py) + dt v`` and the displacement ``u[i] += dt v``.
+
+    ``u`` is kept apart from ``x`` (both advanced by the same ``dt v``) because the crack
+    elements read it: two nodes that start together are then separated to the round-off of
+    ``u``, not of ``x`` (:mod:`fdem.kernels.cracks`, "ref"). ``x`` and ``x0 + u`` agree to the
+    round-off of ``x``.
 
     A prescribed component takes its value and drops its damping force; the support supplies the
     reaction ``r = m (v_p - u)/dt - f`` whose work is booked in half-steps, ``dt/2 r u`` (early)
@@ -119,6 +124,8 @@ def constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, 
     v[i, 1] = ny
     x[i, 0] = px + dt * nx
     x[i, 1] = py + dt * ny
+    u[i, 0] += dt * nx
+    u[i, 1] += dt * ny
     return nx, ny, gdx, gdy, re, rl
 
 
@@ -131,7 +138,7 @@ def damping_factors(alpha, dt):
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey, dt, damped, alpha, c_keep,
+def move_node(x, u, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey, dt, damped, alpha, c_keep,
               c_div, local, flags, v_prescribed):
     """The central-difference update of node ``i``: the one law of every step kernel.
 
@@ -159,13 +166,13 @@ def move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, e
         ny = uy + dt * inv_mass * fy
         gdx = 0.0
         gdy = 0.0
-    nx, ny, gdx, gdy, re, rl = constrain_and_move(x, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
+    nx, ny, gdx, gdy, re, rl = constrain_and_move(x, u, v, i, px, py, ux, uy, nx, ny, gdx, gdy, fx, fy, mass, dt,
                                                   flags, v_prescribed)
     return nx, ny, ux, uy, gdx, gdy, re, rl
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
+def advance_node(x, u, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_keep, c_div, local, damped,
                  f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger):
     """:func:`move_node` with the energies of the ledger: node ``i`` given the force ``(fx, fy)``
     of its triangle(s), plus the interaction force (if ``use_int``) and the external load (if
@@ -189,7 +196,7 @@ def advance_node(x, v, i, fx, fy, gmass, mass, inv_mass, gx, gy, dt, alpha, c_ke
     if use_ext:
         ex = f_ext[i, 0]
         ey = f_ext[i, 1]
-    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey,
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, u, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, use_ext, ex, ey,
                                                  dt, damped, alpha, c_keep, c_div, local, flags, v_prescribed)
     de = 0.0
     dl = 0.0
@@ -231,7 +238,7 @@ def n_blocks(n: int) -> int:
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha,
+def triangle_step(x, u, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha,
                   c_keep, c_div, local, damped, use_viscous, ledger):
     """One triangle of an exploded mesh: its forces at ``x_n`` and the central-difference update
     of its own three nodes ``3t, 3t + 1, 3t + 2`` (:func:`advance_node`).
@@ -261,7 +268,7 @@ def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v
     for k in range(3):  # one inlined call site keeps the compile time down
         mi = m if inertia is None else inertia[i + k, 0]
         im = tc[t, TC_INV_MASS] if inertia is None else inertia[i + k, 1]
-        a = advance_node(x, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
+        a = advance_node(x, u, v, i + k, r[2 * k], r[2 * k + 1], m, mi, im, gx, gy, dt, alpha, c_keep, c_div,
                          local, damped, f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
         kin += a[2]
         if ledger:
@@ -287,7 +294,7 @@ def triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
-def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
+def step_exploded(x, u, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
                   gx, gy, dt, alpha, local, use_viscous, ledger, partial, inertia, ranges=None):
     """One fused step on an exploded mesh (node ``3t + k`` is corner ``k`` of triangle ``t``).
 
@@ -324,7 +331,7 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
         n_bad = 0.0
         t_lo, t_hi = block_span(blk, n_tri, ranges)
         for t in range(t_lo, t_hi):
-            s = triangle_step(x, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy,
+            s = triangle_step(x, u, v, tc, t, inertia, f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy,
                               dt, alpha, c_keep, c_div, local, damped, use_viscous, ledger)
             strain += s[0]
             kin += s[1]
@@ -356,7 +363,7 @@ def step_exploded(x, v, tc, f_int, use_int, f_ext, use_ext, flags, v_prescribed,
 
 
 @njit(fastmath=FASTMATH, cache=True, inline="always")
-def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damped, alpha, c_keep, c_div,
+def advance_node_elastic(x, u, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, dt, damped, alpha, c_keep, c_div,
                          local, flags, v_prescribed):
     """:func:`move_node` for the fast path: gravity, optional damping (the factors of
     :func:`damping_factors`, computed once a step by the caller) and supports; no external
@@ -366,13 +373,13 @@ def advance_node_elastic(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy,
     damping_early, damping_late)`` [J/m, m/s].
     """
     h = 0.5 * dt
-    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, False, 0.0, 0.0,
+    nx, ny, ux, uy, gdx, gdy, re, rl = move_node(x, u, v, i, px, py, fx, fy, gmass, mass, inv_mass, gx, gy, False, 0.0, 0.0,
                                                  dt, damped, alpha, c_keep, c_div, local, flags, v_prescribed)
     return re, rl, nx, ny, ux, uy, -h * (gdx * ux + gdy * uy), -h * (gdx * nx + gdy * ny)
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
-def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia, ranges=None):
+def step_exploded_elastic(x, u, v, tc, f_int, damping, flags, v_prescribed, gx, gy, dt, partial, inertia, ranges=None):
     """Fast path of :func:`step_exploded`: elastic triangles, gravity, interaction forces
     (``f_int`` an array, or ``None`` when there are no providers), damping (``(alpha, local)``
     or ``None``), inertial masses of a density-scaled stage (``inertia`` (n_nodes, 2): masses and inverses, or ``None``)
@@ -439,11 +446,11 @@ def step_exploded_elastic(x, v, tc, f_int, damping, flags, v_prescribed, gx, gy,
             else:
                 ma, mb, mc = inertia[i, 0], inertia[i + 1, 0], inertia[i + 2, 0]
                 ia, ib, ic = inertia[i, 1], inertia[i + 1, 1], inertia[i + 2, 1]
-            a = advance_node_elastic(x, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damped, alpha, c_keep, c_div,
+            a = advance_node_elastic(x, u, v, i, x0, y0, e0x, e0y, m, ma, ia, gx, gy, dt, damped, alpha, c_keep, c_div,
                                      local, flags, v_prescribed)
-            b = advance_node_elastic(x, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damped, alpha, c_keep, c_div,
+            b = advance_node_elastic(x, u, v, i + 1, x1, y1, e1x, e1y, m, mb, ib, gx, gy, dt, damped, alpha, c_keep, c_div,
                                      local, flags, v_prescribed)
-            c = advance_node_elastic(x, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damped, alpha, c_keep, c_div,
+            c = advance_node_elastic(x, u, v, i + 2, x2, y2, e2x, e2y, m, mc, ic, gx, gy, dt, damped, alpha, c_keep, c_div,
                                      local, flags, v_prescribed)
             r_e += a[0] + b[0] + c[0]
             r_l += a[1] + b[1] + c[1]
@@ -519,7 +526,7 @@ def viscous_power(v, triangles, tc, viscous_stress):
 
 
 @njit(parallel=True, fastmath=FASTMATH, cache=True)
-def node_pass(x, v, mass, node_corner_ptr, node_corners, corner_force,
+def node_pass(x, u, v, mass, node_corner_ptr, node_corners, corner_force,
               f_int, use_int, f_ext, use_ext, flags, v_prescribed, gx, gy, dt, alpha, local, ledger):
     """Second pass on a conforming mesh: each node gathers its corners' forces and advances.
 
@@ -546,7 +553,7 @@ def node_pass(x, v, mass, node_corner_ptr, node_corners, corner_force,
             fx += corner_force[c, 0]
             fy += corner_force[c, 1]
         m = mass[i]
-        a = advance_node(x, v, i, fx, fy, m, m, 1.0 / m, gx, gy, dt, alpha, c_keep, c_div, local, damped,
+        a = advance_node(x, u, v, i, fx, fy, m, m, 1.0 / m, gx, gy, dt, alpha, c_keep, c_div, local, damped,
                          f_int, use_int, f_ext, use_ext, flags, v_prescribed, ledger)
         s2 += a[2]
         s3 += a[3]

@@ -250,6 +250,12 @@ class CrackSet:
         self._inv = np.empty(n, dtype=np.int64)
         self._inv[self._perm] = np.arange(n)
         self._nodes = np.ascontiguousarray(self.nodes[self._perm])
+        # The kernels read displacements against the reference geometry, never positions
+        # (fdem.kernels.cracks, "ref"): the separation of two nodes that start together is then
+        # resolved to the round-off of u, not of x.
+        self._x0 = np.ascontiguousarray(topology.x0, dtype=np.float64)
+        self._ref = K.reference_geometry(self._x0, self._nodes)
+        self._bound: tuple[np.ndarray, np.ndarray] | None = None  # (x, u) of the simulation's state
 
         self._const = np.zeros((n, K.N_CONST))
         self._status = np.zeros(n, dtype=np.int8)
@@ -371,7 +377,7 @@ class CrackSet:
         # Ends now outside the envelope soften or slip at once, at fixed positions, with the
         # released stored energy booked exactly (there is no work without motion).
         x = self._x_last if self._x_last is not None else self.topology.x0
-        K.project_to_envelope(np.ascontiguousarray(x, dtype=np.float64), self._nodes, self._const, self._status,
+        K.project_to_envelope(self.displacement(x), self._ref, self._nodes, self._const, self._status,
                               self._state, self._diss, self._offset, self._dil, self._active)
 
     def _dilation_constants(self, tanphi: np.ndarray) -> np.ndarray:
@@ -483,6 +489,23 @@ class CrackSet:
         """Live elements that :meth:`add_forces` evaluates (all of them unless :meth:`set_awake` left some out)."""
         return int(self._run.shape[0])
 
+    def bind_displacement(self, x: np.ndarray, u: np.ndarray) -> None:
+        """Tell the set that the position array ``x`` (n_nodes, 2) comes with its displacement
+        ``u = x - x0`` kept apart (:class:`fdem.solve.simulation.State`): the kernels then read
+        ``u`` whenever they are handed ``x``, and a separation is resolved to the round-off of
+        ``u`` instead of ``x``."""
+        if np.shape(u) != np.shape(x):
+            raise ValueError(f"displacement of shape {np.shape(u)} bound to positions of shape {np.shape(x)}")
+        self._bound = (x, u)
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        """(n_nodes, 2) displacements [m] the kernels read for positions ``x``: the bound
+        displacement (:meth:`bind_displacement`) when ``x`` is the bound position array, else
+        ``x - x0`` (resolved only to the round-off of ``x``)."""
+        if self._bound is not None and x is self._bound[0]:
+            return self._bound[1]
+        return np.ascontiguousarray(np.asarray(x, dtype=np.float64) - self._x0)
+
     def add_element_forces(self, x: np.ndarray, f: np.ndarray, ids: np.ndarray, step: int) -> None:
         """Update the live elements among ``ids`` (topology order) at ``x`` and add their forces
         into ``f`` (n_nodes, 2) [N/m], as :meth:`add_forces` does for the others. An element that
@@ -494,8 +517,8 @@ class CrackSet:
         internal = np.ascontiguousarray(np.sort(internal[live[internal]]))
         if internal.size == 0:
             return
-        nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                   self._offset, self._dil, internal, self._broke_flag)
+        nb = K.crack_forces_serial(self.displacement(x), self._ref, f, self._nodes, self._const, self._status,
+                                   self._state, self._diss, self._offset, self._dil, internal, self._broke_flag)
         if nb:
             self._register_breaks(x, step)
             self._carry_broken = np.union1d(self._carry_broken, self.newly_broken)
@@ -554,14 +577,16 @@ class CrackSet:
             if nb:
                 x = self.device.host_x()  # the breaks' positions and released energies need x_n
         elif self._run.size < self.parallel_min:
-            nb = K.crack_forces_serial(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                       self._offset, self._dil, self._run, self._broke_flag)
+            nb = K.crack_forces_serial(self.displacement(x), self._ref, f, self._nodes, self._const, self._status,
+                                       self._state, self._diss, self._offset, self._dil, self._run, self._broke_flag)
         elif self.scheme == "colour":
-            nb = K.crack_forces_coloured(x, f, self._nodes, self._const, self._status, self._state, self._diss,
-                                         self._offset, self._dil, self._run, self._run_ptr, self._broke_flag)
+            nb = K.crack_forces_coloured(self.displacement(x), self._ref, f, self._nodes, self._const, self._status,
+                                         self._state, self._diss, self._offset, self._dil, self._run, self._run_ptr,
+                                         self._broke_flag)
         else:
-            nb = K.crack_forces_store(x, self._nodes, self._const, self._status, self._state, self._diss,
-                                      self._offset, self._dil, self._active, self._fe, self._broke_flag)
+            nb = K.crack_forces_store(self.displacement(x), self._ref, self._nodes, self._const, self._status,
+                                      self._state, self._diss, self._offset, self._dil, self._active, self._fe,
+                                      self._broke_flag)
             K.gather_node_forces(f, self._node_list, self._node_map, self._fe)
         if nb:
             self._register_breaks(x, step)
@@ -575,7 +600,8 @@ class CrackSet:
         topo_ids = self._perm[ids]
         self.broken[topo_ids] = True
         # Elastic energy still held at breakage (e.g. friction stress, closure) is released.
-        self.released += K.crack_elastic_energy(x, self._nodes, self._const, self._state, self._offset, ids)
+        self.released += K.crack_elastic_energy(self.displacement(x), self._ref, self._nodes, self._const, self._state,
+                                                self._offset, ids)
         mid = 0.25 * x[self._nodes[ids]].sum(axis=1)
         wI, wII = self._diss[ids, K.CW_MODE_I], self._diss[ids, K.CW_MODE_II]
         # Mode from the elliptical damage at failure: share of xi_II^2 in D^2, averaged over ends.
@@ -639,10 +665,10 @@ class CrackSet:
         resisting the slip. Broken elements carry none: 0."""
         if x is None:
             x = self._x_last if self._x_last is not None else self.topology.x0
-        x = np.ascontiguousarray(x, dtype=np.float64)
+        u = self.displacement(x)
         ends = np.empty((self.n_cracks, 4))
         broken = np.ascontiguousarray(self.broken[self._perm])
-        crack_tractions(x, self._nodes, self._const, self._status, self._state, self._offset, self._dil, broken, ends)
+        crack_tractions(u, self._ref, self._nodes, self._const, self._status, self._state, self._offset, self._dil, broken, ends)
         w = 0.5 * self.length0[self._perm]
         normal = np.empty(self.n_cracks)
         shear = np.empty(self.n_cracks)
@@ -688,7 +714,8 @@ class CrackSet:
         """
         el = 0.0
         if self._x_last is not None and self._active.size:
-            el = float(K.crack_elastic_energy(self._x_last, self._nodes, self._const, self._state, self._offset,
+            el = float(K.crack_elastic_energy(self.displacement(self._x_last), self._ref, self._nodes, self._const,
+                                              self._state, self._offset,
                                               self._active))
         return {
             "crack_elastic": el,

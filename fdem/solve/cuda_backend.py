@@ -165,6 +165,7 @@ class CudaBackend:
         sim, cuda = self.sim, self.cuda
         st = sim.state
         self.x = self._to(st.x)
+        self.u = self._to(st.u)  # the displacements the crack kernel reads (State.u)
         self.v = self._to(st.v)
         self.tc = self._to(sim.tc)
         inertia = sim._inertia_kernel
@@ -206,6 +207,7 @@ class CudaBackend:
             return
         st = self.sim.state
         self.x.copy_to_host(st.x)
+        self.u.copy_to_host(st.u)
         self.v.copy_to_host(st.v)
         self._x_fresh = True
         self.round_trips += 1
@@ -229,9 +231,11 @@ class CudaBackend:
         self.attached = False
 
     def host_x(self) -> np.ndarray:
-        """The host's position array, made equal to the device's ``x_n`` (one copy per step at most)."""
+        """The host's position array, made equal to the device's ``x_n`` (one copy per step at
+        most), with the displacements ``u_n`` beside it (the crack set's host code reads them)."""
         if not self._x_fresh:
             self.x.copy_to_host(self.sim.state.x)
+            self.u.copy_to_host(self.sim.state.u)
             self._x_fresh = True
             self.round_trips += 1
         return self.sim.state.x
@@ -239,6 +243,7 @@ class CudaBackend:
     # ------------------------------------------------------------------ crack elements
     def _push_cracks(self, cs) -> None:
         self.c_nodes = self._to(cs._nodes)
+        self.c_ref = self._to(cs._ref)
         self.c_const = self._to(cs._const)
         self.c_status = self._to(cs._status)
         self.c_state = self._to(cs._state)
@@ -285,7 +290,7 @@ class CudaBackend:
             self._push_run(cs)
         if self._n_run:
             k.crack_kernel[k.blocks_for(self._n_run), k.THREADS](
-                self.x, self.f, self.c_nodes, self.c_const, self.c_status, self.c_state, self.c_diss,
+                self.u, self.c_ref, self.f, self.c_nodes, self.c_const, self.c_status, self.c_state, self.c_diss,
                 self.c_offset, self.c_dil, self.c_run, self.c_broke, row[_COUNTS])
 
     def _sync_after_breaks(self, cs) -> None:
@@ -539,7 +544,7 @@ class CudaBackend:
         sim, k = self.sim, self.k
         gx, gy = float(sim.gravity[0]), float(sim.gravity[1])
         k.step_kernel[k.blocks_for(sim.model.n_triangles), k.THREADS](
-            self.x, self.v, self.tc, self.inertia, self.f, use_int, self.f_ext, bool(sim.use_external), self.flags,
+            self.x, self.u, self.v, self.tc, self.inertia, self.f, use_int, self.f_ext, bool(sim.use_external), self.flags,
             self.v_prescribed, gx, gy, sim.dt, float(damping.mass_proportional), float(damping.local),
             bool(sim.use_viscous), bool(ledger), row[_STEP])
 
@@ -566,7 +571,7 @@ class CudaBackend:
 
     def _state_arrays(self) -> list:
         """The device arrays a batch changes (restored when it is refused)."""
-        arrays = [self.x, self.v]
+        arrays = [self.x, self.u, self.v]
         if self.sim.cracks is not None:
             arrays += [self.c_status, self.c_state, self.c_diss, self.c_broke]
         if self.sim.contact is not None and self._n_pairs:

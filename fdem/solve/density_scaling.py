@@ -60,11 +60,18 @@ def triangle_nodal_stiffness(model) -> np.ndarray:
 def nodal_stiffness(model, providers, mass: np.ndarray, triangles: np.ndarray | None = None) -> np.ndarray:
     """(n_nodes,) stiffness ``S_i`` [N/m] every node must carry mass for (module docstring):
     the triangles' shares (``triangles``, or :func:`triangle_nodal_stiffness` when not given:
-    it does not change, a simulation computes it once) plus each force provider's
-    ``nodal_stiffness(mass)``. A provider
-    with only a ``stable_dt(mass)`` counts as ``m (2 / dt_p)^2`` on every node (its bound
-    applies to the real masses); one with neither adds no stiffness."""
+    it does not change, a simulation computes it once) plus the providers'
+    (:func:`provider_stiffness`)."""
     s = (triangle_nodal_stiffness(model) if triangles is None else triangles).copy()
+    return s + provider_stiffness(providers, mass)
+
+
+def provider_stiffness(providers, mass: np.ndarray) -> np.ndarray:
+    """(n_nodes,) stiffness [N/m] the force ``providers`` put on each node: each one's
+    ``nodal_stiffness(mass)``; a provider with only a ``stable_dt(mass)`` counts as
+    ``m (2 / dt_p)^2`` on every node (its bound applies to the real masses); one with neither
+    adds no stiffness."""
+    s = np.zeros(np.shape(mass), dtype=np.float64)
     for p in providers:
         fn = getattr(p, "nodal_stiffness", None)
         if fn is not None:

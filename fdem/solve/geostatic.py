@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 from numba import njit, prange
 from fdem.kernels.triangles import (FASTMATH, TC_MASS, assemble_triangle_forces, triangle_constants, triangle_response)
 from fdem.physics.cracks import CP_C, CP_FT, CP_TANPHI
-from fdem.solve.density_scaling import nodal_stiffness
+from fdem.solve.density_scaling import nodal_stiffness, provider_stiffness
 from fdem.solve.model import FIX_X, FIX_Y
 
 __all__ = ["GeostaticSolution", "GeostaticReport", "conforming_static_stress", "nodal_residual",
@@ -618,23 +618,27 @@ def unbalanced_forces(sim) -> np.ndarray:
 def unbalanced_ratio_floor(sim) -> float:
     """Round-off floor of :func:`unbalanced_force_ratio` [-]:
 
-    ``R_eps = sum_n S_n eps(x_n) / sum_n |m_n g|``
+    ``R_eps = (sum_n S_x,n eps(x_n) + sum_n S_u,n eps(u_n)) / sum_n |m_n g|``
 
-    with ``S_n`` [N/m] the node's stiffness (:func:`fdem.solve.density_scaling.nodal_stiffness`:
-    its triangles, crack-element penalties and contact) and ``eps(x_n)`` [m] the spacing of
-    float64 numbers at its coordinates (``numpy.spacing``). Positions are stored to that spacing,
-    so each force is known only to about ``S eps``; the ratio cannot fall much below ``R_eps``
-    however long a stage runs. It grows as the mesh refines (the crack penalties per node grow
-    against the node's weight, about as ``1 / dt^2``): on the four-slope scene 6.4e-6 at size
-    1.0, 1.03e-5 at 0.5, 1.58e-5 at 0.35, 3.3e-5 at 0.18 (180k triangles). The ratio measured at
-    rest sits 1.3 to 5 times above it: 1.64e-5 at size 1.0, 4.3e-4 with the same model moved
-    1000 m from the origin (positions 20 times coarser), 1.66e-4 at 180k (``docs/benchmarks.md``,
-    "Equilibrium stage at scale")."""
+    with ``S_x,n`` [N/m] the stiffness on node ``n`` of what reads positions (its triangles,
+    contact: :func:`fdem.solve.density_scaling.nodal_stiffness`), ``S_u,n`` that of the providers
+    that read the displacements ``u = x - x0`` kept apart in the state (the crack elements:
+    their ``bind_displacement``), and ``eps`` the spacing of float64 numbers at the magnitude of
+    the coordinate read (``numpy.spacing``). Each force is known only to about ``S eps``; the
+    ratio cannot fall much below ``R_eps`` however long a stage runs.
+
+    The crack penalties are most of the stiffness (91-97 % on the four-slope scenes) and grow
+    against a node's weight as the mesh refines (about as ``1 / dt^2``). Read from positions,
+    100 m from the origin, they set a floor of 9.3e-6, 1.8e-5 and 2.8e-5 at sizes 1.0, 0.5 and
+    0.35 m (the low-angle coarse slope with the run extents); read from displacements, the floor
+    is the contact's and the triangles' (``docs/benchmarks.md``, "The floor and the origin")."""
     mass = sim.state.mass
     tri = getattr(sim, "_triangle_stiffness", None)
-    s = nodal_stiffness(sim.model, sim.providers, mass, tri)
-    eps = np.spacing(np.abs(sim.state.x)).max(axis=1)
-    num = float(s @ eps)
+    reads_u = [p for p in sim.providers if callable(getattr(p, "bind_displacement", None))]
+    reads_x = [p for p in sim.providers if p not in reads_u]
+    num = float(nodal_stiffness(sim.model, reads_x, mass, tri) @ np.spacing(np.abs(sim.state.x)).max(axis=1))
+    if reads_u:
+        num += float(provider_stiffness(reads_u, mass) @ np.spacing(np.abs(sim.state.u)).max(axis=1))
     den = float(mass.sum() * np.linalg.norm(sim.gravity))
     if den == 0.0:
         den = float(np.linalg.norm(sim.f_external, axis=1).sum())

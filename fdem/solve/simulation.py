@@ -147,6 +147,12 @@ class State:
         [s].
     step : int
         Steps taken.
+    u : (n_nodes, 2) float64
+        Displacements from the reference positions ``x0`` [m], advanced by the same ``dt v`` as
+        ``x`` (:func:`fdem.kernels.stepping.constrain_and_move`) and kept apart from it for the
+        crack elements, which read separations from ``u`` (resolved to the round-off of ``u``,
+        not of ``x``; see :mod:`fdem.kernels.cracks`). ``x`` and ``x0 + u`` agree to the
+        round-off of ``x``. ``None`` is taken as zero (a state at its reference positions).
     """
 
     x: np.ndarray
@@ -154,9 +160,14 @@ class State:
     mass: np.ndarray
     time: float = 0.0
     step: int = 0
+    u: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.u is None:
+            self.u = np.zeros_like(self.x, dtype=np.float64)
 
     def copy(self) -> "State":
-        return State(self.x.copy(), self.v.copy(), self.mass, self.time, self.step)
+        return State(self.x.copy(), self.v.copy(), self.mass, self.time, self.step, self.u.copy())
 
 
 class InstabilityError(RuntimeError):
@@ -287,7 +298,7 @@ class Simulation:
         self.triangles = np.ascontiguousarray(topo.triangles, dtype=np.int64)
         self.tc = model.triangle_constants()
         self.state = State(x=self.x0.copy(), v=np.ascontiguousarray(model.initial_velocity, dtype=np.float64).copy(),
-                           mass=model.node_mass())
+                           mass=model.node_mass(), u=np.zeros_like(self.x0))
         self.flags = model.flags.copy()
         self.v_prescribed = model.v_prescribed.copy()
         self.f_interaction = np.zeros((model.n_nodes, 2))
@@ -359,6 +370,9 @@ class Simulation:
             if self.contact is not None:
                 raise ValueError("a simulation takes one ContactSet; this one already has one")
             self.contact = provider
+        bind = getattr(provider, "bind_displacement", None)
+        if callable(bind):  # the crack elements read the state's displacements (State.u)
+            bind(self.state.x, self.state.u)
         self.providers.append(provider)
         if hasattr(self, "dt"):
             self.dt = self._choose_dt()
@@ -511,6 +525,46 @@ class Simulation:
             self.sleeping = Sleeping(self, sleeping if isinstance(sleeping, SleepPolicy) else SleepPolicy())
             self.add_monitor("asleep_fraction", lambda s: s.sleeping.fraction_asleep if s.sleeping else 0.0)
 
+    def set_positions(self, x: np.ndarray | None = None, *, displace: np.ndarray | None = None) -> None:
+        """Move the nodes by hand: to the positions ``x`` (n_nodes, 2) [m], or by ``displace``
+        [m] from where they are, keeping the displacements ``State.u`` beside the positions (the
+        crack elements read ``u``; writing ``state.x`` alone would leave them where they were,
+        which the next history row or output frame refuses). ``x`` sets ``u = x - x0``, to the
+        round-off of ``x``; ``displace`` adds to both."""
+        st = self.state
+        if (x is None) == (displace is None):
+            raise ValueError("set_positions takes the positions x or a displacement displace, one of them")
+        if x is not None:
+            x = np.asarray(x, dtype=np.float64)
+            if x.shape != st.x.shape or not np.isfinite(x).all():
+                raise ValueError(f"set_positions: x must be finite, of shape {st.x.shape}, got {x.shape}")
+            st.x[:] = x
+            st.u[:] = x - self.x0
+        else:
+            du = np.asarray(displace, dtype=np.float64)
+            if du.shape != st.x.shape or not np.isfinite(du).all():
+                raise ValueError(f"set_positions: displace must be finite, of shape {st.x.shape}, got {du.shape}")
+            st.x[:] += du
+            st.u[:] += du
+
+    def _check_positions_kept(self) -> None:
+        """Refuse a state whose positions were written without their displacements (a script
+        that set ``state.x`` by hand): the crack elements would act on the old ones. Without a
+        provider that reads ``u`` it is set to ``x - x0`` instead. ``x`` and
+        ``x0 + u`` agree to round-off (they are advanced by the same ``dt v``); the tolerance is
+        a million times the spacing of float64 numbers at the largest coordinate."""
+        st = self.state
+        if not any(callable(getattr(p, "bind_displacement", None)) for p in self.providers):
+            st.u[:] = st.x - self.x0  # nothing reads u: it follows whatever was done to x
+            return
+        gap = np.abs(st.x - self.x0 - st.u)
+        tol = 1e6 * float(np.spacing(np.abs(st.x).max() + np.abs(self.x0).max()))
+        worst = int(np.argmax(gap.max(axis=1)))
+        if gap[worst].max() > tol:
+            raise ValueError(f"the positions were changed without the displacements: node {worst} at "
+                             f"({st.x[worst, 0]:.6g}, {st.x[worst, 1]:.6g}) m is {gap[worst].max():.3g} m from x0 + u; "
+                             f"move nodes with Simulation.set_positions, which keeps State.u beside State.x")
+
     def wake(self) -> None:
         """Wake every sleeping region (:mod:`fdem.solve.sleeping`): call it after changing supports,
         prescribed velocities or loads by hand (gravity, strengths and masses wake by themselves)."""
@@ -533,7 +587,9 @@ class Simulation:
         st = self.state
         if self._device is not None:
             return self._device_step(damping, ledger)
-        x, v, dt = st.x, st.v, self.dt
+        if ledger:  # a history row: positions written without displacements are caught here
+            self._check_positions_kept()
+        x, u, v, dt = st.x, st.u, st.v, self.dt
         use_int = bool(self.providers)
         sl = self.sleeping
         if sl is not None and (damping.mass_proportional != 0.0 or damping.local != 0.0) \
@@ -571,14 +627,14 @@ class Simulation:
         if self.exploded and not (ledger or self.use_viscous or self.use_external):
             # fast path (most steps of a dynamic or damped stage): no state energies needed
             r_e, r_l, i_e, i_l, d_e, d_l, n_bad, kin = step_exploded_elastic(
-                x, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
+                x, u, v, self.tc, f_int if use_int else None, np.array([alpha, local]) if damped else None,
                 self.flags, self.v_prescribed, gx, gy, dt, partial, self._inertia_kernel, ranges)
             sums = StepSums(strain=0.0, kinetic=kin, gravity_moment=0.0, external_moment=0.0,
                             damping_early=d_e, damping_late=d_l, viscous_early=0.0, viscous_late=0.0,
                             reaction_early=r_e, reaction_late=r_l, interaction_early=i_e, interaction_late=i_l,
                             n_inverted=n_bad)
         elif self.exploded:
-            sums = StepSums._make(step_exploded(x, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
+            sums = StepSums._make(step_exploded(x, u, v, self.tc, f_int, use_int, f_ext, self.use_external, self.flags,
                                                 self.v_prescribed, gx, gy, dt, alpha, local, self.use_viscous,
                                                 ledger, partial, self._inertia_kernel, ranges))
             if ranges is not None and ledger:  # the sleeping regions' frozen energies
@@ -590,7 +646,7 @@ class Simulation:
             strain, rate, n_bad = triangle_pass(x, v, self.triangles, self.tc, self._corner_force,
                                                 self._viscous_stress, self.use_viscous)
             kin, gm, em, d_e, d_l, r_e, r_l, i_e, i_l = node_pass(
-                x, v, st.mass, ptr, corners, self._corner_force, f_int, use_int, f_ext, self.use_external,
+                x, u, v, st.mass, ptr, corners, self._corner_force, f_int, use_int, f_ext, self.use_external,
                 self.flags, self.v_prescribed, gx, gy, dt, alpha, local, ledger)
             v_e = v_l = 0.0
             if self.use_viscous:
@@ -1074,6 +1130,8 @@ class Simulation:
         """Write one output frame of the current state: triangles VTU, crack VTU (with crack
         elements), contact VTU (with a contact set), optional PNG (``docs/outputs.md``)."""
         t0 = _clock()
+        if self._device is None:
+            self._check_positions_kept()
         try:
             self._write_frame()
         finally:
@@ -1161,7 +1219,8 @@ class Simulation:
         led = self.ledger
         terms, complete = self._provider_terms
         return {
-            "x": self.state.x.copy(), "v": self.state.v.copy(), "time": float(self.state.time),
+            "x": self.state.x.copy(), "u": self.state.u.copy(), "v": self.state.v.copy(),
+            "time": float(self.state.time),
             "step": int(self.state.step), "flags": self.flags.copy(), "v_prescribed": self.v_prescribed.copy(),
             "gravity": self.gravity.copy(), "f_interaction": self.f_interaction.copy(),
             "ledger": {"done": dict(led.done), "first_early": None if led.first_early is None else dict(led.first_early),
@@ -1181,7 +1240,8 @@ class Simulation:
             "history": [dict(r) for r in self.history], "frames": int(self._frames), "stage": self._stage,
             "provider_terms": [dict(terms), bool(complete)],
             "last_row": None if self.last_row is None else dict(self.last_row), "dt": float(self.dt),
-            "good": {"x": self._good.x.copy(), "v": self._good.v.copy(), "time": float(self._good.time),
+            "good": {"x": self._good.x.copy(), "u": self._good.u.copy(), "v": self._good.v.copy(),
+                     "time": float(self._good.time),
                      "step": int(self._good.step)},
             "providers": [p.state_dict() for p in self.providers],
             "sleeping": None if self.sleeping is None else self.sleeping.state_dict(),
@@ -1225,6 +1285,8 @@ class Simulation:
                 raise ValueError(f"force provider {i} was a {kind} when saved, here it is a {type(p).__name__}")
         st = self.state
         st.x[:] = d["x"]
+        # older checkpoints kept no displacement: x - x0 (resolved to the round-off of x)
+        st.u[:] = d["u"] if d.get("u") is not None else st.x - self.x0
         st.v[:] = d["v"]
         st.time = float(d["time"])
         st.step = int(d["step"])
@@ -1253,8 +1315,9 @@ class Simulation:
         self.last_row = None if d["last_row"] is None else dict(d["last_row"])
         self.dt = float(d["dt"])
         g = d["good"]
-        self._good = State(np.array(g["x"], dtype=np.float64), np.array(g["v"], dtype=np.float64), st.mass,
-                           float(g["time"]), int(g["step"]))
+        gx = np.array(g["x"], dtype=np.float64)
+        self._good = State(gx, np.array(g["v"], dtype=np.float64), st.mass, float(g["time"]), int(g["step"]),
+                           np.array(g["u"], dtype=np.float64) if g.get("u") is not None else gx - self.x0)
         for p, s in zip(self.providers, saved):  # every provider: load_state_dict(d, x), x the restored positions
             p.load_state_dict(s, x=st.x)
         for name, record in (d.get("monitor_records") or {}).items():  # older checkpoints: none

@@ -183,7 +183,7 @@ def measured_critical_dt(sim, max_iterations: int = 400, rtol: float = 1e-6, eps
         sim.load_state_dict(saved)
         sim.wake()  # a sleeping region's frozen forces would read as no stiffness
         if u is not None:
-            sim.state.x[:] += u
+            sim.set_positions(displace=u)
         sim.state.v[:] = 0.0
         sim.step()
         return sim.state.v / sim.dt

@@ -7,6 +7,7 @@ are those of docs/verification.md (peak 0.5 %, energy 1 %).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -136,6 +137,31 @@ def test_compression_is_resisted_by_the_normal_penalty():
         sig, tau, _, _ = dr.move(o, 0.0)
         assert sig == pytest.approx(KN * o, rel=1e-12)
     assert dr.cs.damage[0] == 0.0
+
+
+def test_a_picometre_opening_is_resolved_however_far_the_element_lies_from_the_origin():
+    """The crack kernels read displacements, not positions: 10 km from the origin, where
+    positions are stored to 1.8e-12 m, an opening of 1e-13 m gives ``KN o`` to round-off as it
+    does at the origin once the element is bound to the state's displacements; read from the
+    positions (no binding) it is lost to their spacing."""
+    o = -1.0e-13
+    sig = {}
+    for far, bound in ((0.0, True), (1.0e4, True), (1.0e4, False)):
+        topo = dataclasses.replace(two_triangles(), x0=two_triangles().x0 + far)
+        cs = CrackSet(topo, {0: props()})
+        cn = topo.crack_nodes[0]
+        u = np.zeros_like(topo.x0)
+        u[cn[3]] = [0.0, -o]   # n = -y: an opening o moves B_p by o n
+        u[cn[2]] = [0.0, -o]
+        x = topo.x0 + u
+        if bound:
+            cs.bind_displacement(x, u)
+        f = np.zeros_like(x)
+        cs.add_forces(x, None, f, 1e-3, 0)
+        sig[(far, bound)] = -f[cn[3]] @ np.array([0.0, -1.0]) / (0.5 * L)
+    assert sig[(0.0, True)] == pytest.approx(KN * o, rel=1e-12)
+    assert sig[(1.0e4, True)] == pytest.approx(KN * o, rel=1e-12)
+    assert abs(sig[(1.0e4, False)] - KN * o) > 0.5 * abs(KN * o)   # x + 1e-13 rounds to x: no opening seen
 
 
 # ----------------------------------------------------------------------------- mode II

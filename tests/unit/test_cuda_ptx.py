@@ -24,9 +24,9 @@ from numba import boolean, float64, int8, int32, int64, uint8  # noqa: E402
 
 A2 = float64[:, :]
 SIGNATURES = {
-    "step_kernel": (A2, A2, A2, A2, A2, boolean, A2, boolean, uint8[:], A2, float64, float64, float64, float64,
+    "step_kernel": (A2, A2, A2, A2, A2, A2, boolean, A2, boolean, uint8[:], A2, float64, float64, float64, float64,
                     float64, boolean, boolean, float64[:]),
-    "crack_kernel": (A2, A2, int32[:, :], A2, int8[:], A2, A2, A2, A2, int64[:], int8[:], float64[:]),
+    "crack_kernel": (A2, A2, A2, int32[:, :], A2, int8[:], A2, A2, A2, A2, int64[:], int8[:], float64[:]),
     "contact_kernel": (A2, A2, int64[:], int64[:], int64[:], float64, float64[:], A2, float64, float64[:], float64[:],
                        float64, A2, A2, uint8[:], uint8[:], A2, float64[:]),
     "gather_kernel": (A2, int64[:], int64[:], int64[:], A2, uint8[:]),

@@ -64,7 +64,7 @@ def test_time_step_fractions_up_to_the_critical_step_stay_stable(dt_fraction):
     model = Model(topo, ElasticMaterial(E, NU, RHO))
     sim = Simulation(model, providers=[CrackSet(topo, {0: glue()})], progress=False, dt_fraction=dt_fraction)
     H = np.array([[2e-3, 1e-3], [-5e-4, -1e-3]])
-    sim.state.x[:] = topo.x0 + (topo.x0 - 0.5) @ H.T
+    sim.set_positions(topo.x0 + (topo.x0 - 0.5) @ H.T)
     sim.run(n_steps=3000, history_every=100, output_every=10**9)
     assert_sane(sim, 1e-4)
     held = max(held_energy(r) for r in sim.history)

@@ -44,7 +44,7 @@ def dense_omega_max(sim, eps=1e-8):
 
     def accel(du):
         sim.load_state_dict(saved)
-        sim.state.x[:] += du
+        sim.set_positions(displace=du)
         sim.state.v[:] = 0.0
         sim.step()
         return (sim.state.v / sim.dt).ravel().copy()
