@@ -52,7 +52,7 @@ from fdem.solve.simulation import set_default_backend
 
 __all__ = ["case_parser", "set_threads", "threads_for_mesh", "cap_simulated_time", "time_capped",
            "stop_cleanly_on_signals", "use_density_scaling", "check_common", "add_resume_options",
-           "prepare_run", "other_writer", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
+           "prepare_run", "other_writer", "sign_journal", "open_run", "start_journal", "finish_run", "exit_code", "RUN_FILE", "OUTPUT_SUFFIXES",
            "check_mesh_size", "report_cost", "report_runout_cost", "CONFIRM_ABOVE_HOURS", "write_report",
            "add_write_scene_option", "write_case_scene", "add_number_options"]
 
@@ -559,13 +559,8 @@ def start_journal(sim, args, folder=None):
     every = getattr(args, "checkpoint_every", None) or None
     path = Path(folder if folder is not None else args.out) / CHECKPOINT_NAME
     sim.dt_fraction = getattr(args, "dt_fraction", sim.dt_fraction)
-    source = _source()
     if getattr(args, "resume", None) is not None and path.is_file():
-        journal = RunJournal.resume_from(sim, path, every)
-        journal.writer = source
-        note = other_writer(journal.written_by, source)
-        if note:
-            warn(f"--resume {path.parent}: {note}")
+        journal = sign_journal(RunJournal.resume_from(sim, path, every), path)
         if getattr(args, "carry_on", False):  # checked against summary.json by prepare_run
             from fdem.solve.checkpoint import read_checkpoint
 
@@ -582,8 +577,19 @@ def start_journal(sim, args, folder=None):
         say(f"resumed from {path} at step {sim.state.step} (t = {sim.state.time:.6g} s): "
               f"{len(journal.done)} stage(s) done" + (f", {journal.resume['name']} in progress" if journal.resume else ""))
         return journal
-    journal = RunJournal(path, every)
-    journal.writer = source   # each checkpoint names the code that wrote it, for a resume to compare
+    return sign_journal(RunJournal(path, every))
+
+
+def sign_journal(journal, resumed: Path | None = None):
+    """``journal`` with this code (:func:`_source`) as the writer its checkpoints name, for a
+    resume to compare; when it was ``resumed`` from the checkpoint at that path, warns if
+    another commit wrote it (:func:`other_writer`). Returns the journal."""
+    source = _source()
+    journal.writer = source
+    if resumed is not None:
+        note = other_writer(journal.written_by, source)
+        if note:
+            warn(f"--resume {Path(resumed).parent}: {note}")
     return journal
 
 

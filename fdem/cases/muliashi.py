@@ -40,8 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from fdem.cases.common import (add_resume_options, cap_simulated_time, case_parser, check_common, finish_run,
-                               open_run, prepare_run, set_threads, start_journal, stop_cleanly_on_signals, threads_for_mesh,
-                               time_capped, use_density_scaling)
+                               open_run, prepare_run, set_threads, sign_journal, start_journal, stop_cleanly_on_signals,
+                               threads_for_mesh, time_capped, use_density_scaling)
 
 from fdem.geometry.joint_sets import SegmentSet
 from fdem.geometry.section import Geometry
@@ -412,13 +412,13 @@ def _search_journal(sim, args, out: Path):
     path = out / SEARCH_CHECKPOINT
     every = getattr(args, "checkpoint_every", None) or None
     if getattr(args, "resume", None) is not None and path.is_file():
-        journal = RunJournal.resume_from(sim, path, every)
+        journal = sign_journal(RunJournal.resume_from(sim, path, every), path)
         from fdem.workflow.fos import TRIALS_MARK
 
         done = "done" if "fos" in journal.marks else f"{len(journal.marks.get(TRIALS_MARK, {}).get('trials', []))} trial(s) done"
         say(f"resumed the gravity-factor search from {path}: {done}")
         return journal
-    return RunJournal(path, every)
+    return sign_journal(RunJournal(path, every))   # its checkpoints name the code that wrote them
 
 
 def run_one(args, spacing_rule: str, out: Path) -> dict:

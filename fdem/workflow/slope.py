@@ -576,7 +576,7 @@ def _gravity_increase(sim, wf, summary, record, rules, out_dir, journal) -> None
     still standing at the upper factor is ``stable``; one failing at the lower is loaded there."""
     import dataclasses
 
-    T, height, g, step_time, fail, damped = rules[:6]
+    T, height, g = rules.T, rules.height, rules.g
     lower, upper, tol = wf.fos
     trial = trial_stage(sim, wf, rules)
 

@@ -400,6 +400,11 @@ def test_a_muliashi_run_stopped_in_its_gravity_search_goes_on_from_its_last_fini
     cut = muliashi.main(scene + ["--out", str(tmp_path / "cut")])
     assert cut["outcome"] == "interrupted" and (tmp_path / "cut" / muliashi.SEARCH_CHECKPOINT).is_file()
     assert not (tmp_path / "cut" / "fos.json").exists()
+    # the search's checkpoint names the code that wrote it, as the run's own does
+    from fdem.cases.common import _source
+    from fdem.solve.checkpoint import read_checkpoint
+
+    assert read_checkpoint(tmp_path / "cut" / muliashi.SEARCH_CHECKPOINT)["context"].get("writer") == _source()
 
     calls.clear()
     stop_at = None
