@@ -376,7 +376,7 @@ class CrackSet:
         self._const[:] = new
         # Ends now outside the envelope soften or slip at once, at fixed positions, with the
         # released stored energy booked exactly (there is no work without motion).
-        x = self._x_last if self._x_last is not None else self.topology.x0
+        x = self._positions_now()
         K.project_to_envelope(self.displacement(x), self._ref, self._nodes, self._const, self._status,
                               self._state, self._diss, self._offset, self._dil, self._active)
 
@@ -496,7 +496,20 @@ class CrackSet:
         ``u`` instead of ``x``."""
         if np.shape(u) != np.shape(x):
             raise ValueError(f"displacement of shape {np.shape(u)} bound to positions of shape {np.shape(x)}")
-        self._bound = (x, u)
+        self._bound = (x, u)   # the latest simulation to take the set (bound_to tells an earlier one)
+
+    def bound_to(self, x: np.ndarray) -> bool:
+        """Whether the set reads the displacements that come with the position array ``x``: a
+        simulation whose crack set another simulation took over since (:meth:`bind_displacement`)
+        finds it is not, and refuses to step rather than act on the other's displacements."""
+        return self._bound is not None and self._bound[0] is x
+
+    def _positions_now(self) -> np.ndarray:
+        """The positions of the last :meth:`add_forces`, else the bound state's, else the
+        reference ones."""
+        if self._x_last is not None:
+            return self._x_last
+        return self._bound[0] if self._bound is not None else self.topology.x0
 
     def displacement(self, x: np.ndarray) -> np.ndarray:
         """(n_nodes, 2) displacements [m] the kernels read for positions ``x``: the bound
@@ -575,7 +588,7 @@ class CrackSet:
         if self.device is not None:  # the same law on the GPU; breaks are registered here, on the host
             nb = self.device.crack_forces(self)
             if nb:
-                x = self.device.host_x()  # the breaks' positions and released energies need x_n
+                x = self.device.host_x(with_u=True)  # the breaks' positions and released energies need x_n, u_n
         elif self._run.size < self.parallel_min:
             nb = K.crack_forces_serial(self.displacement(x), self._ref, f, self._nodes, self._const, self._status,
                                        self._state, self._diss, self._offset, self._dil, self._run, self._broke_flag)
@@ -664,7 +677,7 @@ class CrackSet:
         negative (a geostatic preload included: the law adds the offsets); shear: the traction
         resisting the slip. Broken elements carry none: 0."""
         if x is None:
-            x = self._x_last if self._x_last is not None else self.topology.x0
+            x = self._positions_now()
         u = self.displacement(x)
         ends = np.empty((self.n_cracks, 4))
         broken = np.ascontiguousarray(self.broken[self._perm])

@@ -138,7 +138,7 @@ class CudaBackend:
                                "nodes, as the crack elements need); this model's mesh is conforming")
         self.sim = sim
         self.attached = False
-        self._x_fresh = False  # the host's x equals the device's x_n of this step
+        self._x_fresh = self._u_fresh = False  # the host's x (u) equals the device's x_n (u_n) of this step
         self._pending_contact = False  # contact sums of this step still on the device
         self._moved_read = False  # the contact trigger of this step has come back
         self._after_breaks = False  # the host cleared break flags that the device must get
@@ -164,6 +164,8 @@ class CudaBackend:
         """Copy the whole state to the device (the start of a run)."""
         sim, cuda = self.sim, self.cuda
         st = sim.state
+        sim._check_positions_kept()  # positions written by hand without u are refused before the run
+        sim._check_cracks_bound()
         self.x = self._to(st.x)
         self.u = self._to(st.u)  # the displacements the crack kernel reads (State.u)
         self.v = self._to(st.v)
@@ -209,7 +211,7 @@ class CudaBackend:
         self.x.copy_to_host(st.x)
         self.u.copy_to_host(st.u)
         self.v.copy_to_host(st.v)
-        self._x_fresh = True
+        self._x_fresh = self._u_fresh = True
         self.round_trips += 1
         if state_only:
             return
@@ -230,14 +232,17 @@ class CudaBackend:
                 p.device = None
         self.attached = False
 
-    def host_x(self) -> np.ndarray:
+    def host_x(self, with_u: bool = False) -> np.ndarray:
         """The host's position array, made equal to the device's ``x_n`` (one copy per step at
-        most), with the displacements ``u_n`` beside it (the crack set's host code reads them)."""
+        most); ``with_u`` brings the displacements ``u_n`` too (the crack set's host code reads
+        them: energies, breaks), which contact's reads of the positions do not need."""
         if not self._x_fresh:
             self.x.copy_to_host(self.sim.state.x)
-            self.u.copy_to_host(self.sim.state.u)
             self._x_fresh = True
             self.round_trips += 1
+        if with_u and not self._u_fresh:
+            self.u.copy_to_host(self.sim.state.u)
+            self._u_fresh = True
         return self.sim.state.x
 
     # ------------------------------------------------------------------ crack elements
@@ -502,15 +507,15 @@ class CudaBackend:
         sim, k = self.sim, self.k
         st = sim.state
         dt = sim.dt
-        self._x_fresh = False
+        self._x_fresh = self._u_fresh = False
         self._moved_read = False
         self.scalars.copy_to_device(self._zero_scalars)
         self.host_scalars[:] = 0.0
         use_int = bool(sim.providers)
         if use_int:
             k.zero_kernel[k.blocks_for(sim.model.n_nodes), k.THREADS](self.f)
-            if ledger:  # the providers' energies are those of x_n
-                self.host_x()
+            if ledger:  # the providers' energies are those of x_n (the crack elements' of u_n)
+                self.host_x(with_u=True)
             hx = HostPositions(self)
             for p in sim.providers:
                 if p is sim.cracks:
@@ -534,9 +539,9 @@ class CudaBackend:
                 if sim.cracks is not None:
                     self._pull_cracks(sim.cracks)
                 sim._provider_terms = sim._collect_provider_terms()
-            self._x_fresh = False
+            self._x_fresh = self._u_fresh = False
             self.pull()  # monitors and stop rules read the state after the step
-        self._x_fresh = False
+        self._x_fresh = self._u_fresh = False
         sums = s[_STEP]
         return StepSums(*(float(e) for e in sums[:12]), int(round(sums[12])))
 

@@ -151,8 +151,9 @@ class State:
         Displacements from the reference positions ``x0`` [m], advanced by the same ``dt v`` as
         ``x`` (:func:`fdem.kernels.stepping.constrain_and_move`) and kept apart from it for the
         crack elements, which read separations from ``u`` (resolved to the round-off of ``u``,
-        not of ``x``; see :mod:`fdem.kernels.cracks`). ``x`` and ``x0 + u`` agree to the
-        round-off of ``x``. ``None`` is taken as zero (a state at its reference positions).
+        not of ``x``; see :mod:`fdem.kernels.cracks`). ``x`` and ``x0 + u`` are rounded apart, by
+        at most half a spacing of ``x`` a step (:meth:`Simulation._check_positions_kept`).
+        ``None`` is taken as zero (a state at its reference positions).
     """
 
     x: np.ndarray
@@ -299,6 +300,7 @@ class Simulation:
         self.tc = model.triangle_constants()
         self.state = State(x=self.x0.copy(), v=np.ascontiguousarray(model.initial_velocity, dtype=np.float64).copy(),
                            mass=model.node_mass(), u=np.zeros_like(self.x0))
+        self._positions_set_at = 0  # the step at which x and x0 + u were last set together
         self.flags = model.flags.copy()
         self.v_prescribed = model.v_prescribed.copy()
         self.f_interaction = np.zeros((model.n_nodes, 2))
@@ -546,19 +548,35 @@ class Simulation:
                 raise ValueError(f"set_positions: displace must be finite, of shape {st.x.shape}, got {du.shape}")
             st.x[:] += du
             st.u[:] += du
+        self._positions_set_at = st.step
+
+    def _check_cracks_bound(self) -> None:
+        """Refuse to step a simulation whose crack set another simulation has taken since: the
+        set reads the displacements of one state (:meth:`fdem.physics.cracks.CrackSet.bind_displacement`)."""
+        if self.cracks is not None and not self.cracks.bound_to(self.state.x):
+            raise RuntimeError("this simulation's CrackSet was handed to another Simulation since, and reads that "
+                               "one's displacements now; step the newer simulation, or give each simulation a "
+                               "CrackSet of its own")
 
     def _check_positions_kept(self) -> None:
         """Refuse a state whose positions were written without their displacements (a script
         that set ``state.x`` by hand): the crack elements would act on the old ones. Without a
-        provider that reads ``u`` it is set to ``x - x0`` instead. ``x`` and
-        ``x0 + u`` agree to round-off (they are advanced by the same ``dt v``); the tolerance is
-        a million times the spacing of float64 numbers at the largest coordinate."""
+        provider that reads ``u`` it is set to ``x - x0`` instead.
+
+        ``x`` and ``x0 + u`` are advanced by the same ``dt v`` and rounded apart: each step
+        rounds ``x`` by at most half the spacing ``eps`` of float64 numbers at its size (and
+        ``u`` by far less), and the roundings need not cancel (a constant velocity rounds the
+        same way every step; an increment under ``eps/2`` moves ``u`` and not ``x``). The gap
+        allowed is ``(1000 + n/2) eps`` after ``n`` steps since they were last set together
+        (start, :meth:`set_positions`, a restored state), so a long run is never refused for
+        its own round-off: 3.5e6 steps 165 m from the origin allow 1e-7 m."""
         st = self.state
         if not any(callable(getattr(p, "bind_displacement", None)) for p in self.providers):
             st.u[:] = st.x - self.x0  # nothing reads u: it follows whatever was done to x
             return
         gap = np.abs(st.x - self.x0 - st.u)
-        tol = 1e6 * float(np.spacing(np.abs(st.x).max() + np.abs(self.x0).max()))
+        eps = float(np.spacing(max(np.abs(st.x).max(), np.abs(self.x0).max())))
+        tol = (1e3 + 0.5 * max(st.step - self._positions_set_at, 0)) * eps
         worst = int(np.argmax(gap.max(axis=1)))
         if gap[worst].max() > tol:
             raise ValueError(f"the positions were changed without the displacements: node {worst} at "
@@ -589,6 +607,7 @@ class Simulation:
             return self._device_step(damping, ledger)
         if ledger:  # a history row: positions written without displacements are caught here
             self._check_positions_kept()
+        self._check_cracks_bound()
         x, u, v, dt = st.x, st.u, st.v, self.dt
         use_int = bool(self.providers)
         sl = self.sleeping
@@ -1220,6 +1239,7 @@ class Simulation:
         terms, complete = self._provider_terms
         return {
             "x": self.state.x.copy(), "u": self.state.u.copy(), "v": self.state.v.copy(),
+            "positions_set_at": int(self._positions_set_at),
             "time": float(self.state.time),
             "step": int(self.state.step), "flags": self.flags.copy(), "v_prescribed": self.v_prescribed.copy(),
             "gravity": self.gravity.copy(), "f_interaction": self.f_interaction.copy(),
@@ -1288,6 +1308,8 @@ class Simulation:
         # older checkpoints kept no displacement: x - x0 (resolved to the round-off of x)
         st.u[:] = d["u"] if d.get("u") is not None else st.x - self.x0
         st.v[:] = d["v"]
+        # the drift the check allows counts from the step the restored state reached it at
+        self._positions_set_at = int(d.get("positions_set_at", 0))
         st.time = float(d["time"])
         st.step = int(d["step"])
         self.flags[:] = d["flags"]

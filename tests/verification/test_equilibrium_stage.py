@@ -149,6 +149,9 @@ def test_the_ratio_at_rest_does_not_depend_on_the_origin_and_sits_at_its_round_o
                              converge=Convergence(unbalanced_ratio=1e-30, roundoff_factor=None)), frames=False)
         floor = unbalanced_ratio_floor(sim)
         assert 0.3 * floor <= unbalanced_force_ratio(sim) <= 3.0 * floor, name
+        # positions and displacements are rounded apart by at most half a spacing a step
+        spacing = np.spacing(np.abs(sim.state.x).max())
+        assert np.abs(sim.state.x - sim.x0 - sim.state.u).max() <= 0.5 * sim.state.step * spacing, name
     # the same column 4096 m from the origin settles the same, in the same steps: the crack
     # elements read the displacements kept apart from the positions (State.u), so their stiff
     # springs turn no coordinate round-off into force
@@ -179,3 +182,27 @@ def test_a_limit_under_the_floor_is_raised_to_it_and_the_stage_ends_there():
     assert r.reason == "converged" and "round-off floor" in r.detail and r.steps < bare.steps
     with pytest.raises(ValueError, match="roundoff_factor"):
         Convergence(roundoff_factor=0.0)
+
+
+def test_the_crack_elements_act_on_the_displacements_of_the_one_simulation_that_steps_them():
+    """Positions written by hand without their displacements are refused at the next history
+    row (the crack elements would act on the old ones); :meth:`Simulation.set_positions` keeps
+    both, and the elements feel the move. A crack set handed to a second simulation reads that
+    one's displacements: the first refuses to step."""
+    sim = jointed_column((4096.0, 4096.0))
+    top = np.flatnonzero(np.isclose(sim.x0[:, 1], sim.x0[:, 1].max()))
+    sim.state.x[top, 1] += 1e-4
+    with pytest.raises(ValueError, match="set_positions"):
+        sim.step(ledger=True)
+    sim.state.x[:] = sim.x0
+    du = np.zeros_like(sim.x0)
+    du[top, 1] = 1e-4                       # the top row lifted: the crack elements under it open
+    sim.set_positions(displace=du)
+    sim.step(ledger=True)
+    assert sim.cracks.energy_terms()["crack_elastic"] > 0.0
+    from fdem.solve.simulation import Simulation
+
+    other = Simulation(sim.model, providers=sim.providers, progress=False)
+    with pytest.raises(RuntimeError, match="handed to another Simulation"):
+        sim.step()
+    other.step()
