@@ -399,20 +399,12 @@ def element_kinematics(c, u, ref, nodes, offset):
     i1 = nodes[c, 1]
     i2 = nodes[c, 2]
     i3 = nodes[c, 3]
-    u0x = u[i0, 0]
-    u0y = u[i0, 1]
-    u1x = u[i1, 0]
-    u1y = u[i1, 1]
-    u2x = u[i2, 0]
-    u2y = u[i2, 1]
-    u3x = u[i3, 0]
-    u3y = u[i3, 1]
-    d0x = ref[c, CR_D0X] + (u3x - u0x)
-    d0y = ref[c, CR_D0Y] + (u3y - u0y)
-    d1x = ref[c, CR_D1X] + (u2x - u1x)
-    d1y = ref[c, CR_D1Y] + (u2y - u1y)
-    ax = ref[c, CR_AX] + (u1x - u0x)
-    ay = ref[c, CR_AY] + (u1y - u0y)
+    d0x = ref[c, CR_D0X] + (u[i3, 0] - u[i0, 0])
+    d0y = ref[c, CR_D0Y] + (u[i3, 1] - u[i0, 1])
+    d1x = ref[c, CR_D1X] + (u[i2, 0] - u[i1, 0])
+    d1y = ref[c, CR_D1Y] + (u[i2, 1] - u[i1, 1])
+    ax = ref[c, CR_AX] + (u[i1, 0] - u[i0, 0])
+    ay = ref[c, CR_AY] + (u[i1, 1] - u[i0, 1])
     # face B = x_2 - x_3 = face A + d1 - d0
     bx = ax + d1x - d0x
     by = ay + d1y - d0y
