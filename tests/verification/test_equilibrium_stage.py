@@ -187,7 +187,8 @@ def test_a_limit_under_the_floor_is_raised_to_it_and_the_stage_ends_there():
 def test_the_crack_elements_act_on_the_displacements_of_the_one_simulation_that_steps_them():
     """Positions written by hand without their displacements are refused at the next history
     row (the crack elements would act on the old ones); :meth:`Simulation.set_positions` keeps
-    both, and the elements feel the move. A crack set handed to a second simulation reads that
+    both, and the elements carry the tractions the move gives (the same as from ``x - x0``, to
+    its round-off). A crack set handed to a second simulation reads that
     one's displacements: the first refuses to step."""
     sim = jointed_column((4096.0, 4096.0))
     top = np.flatnonzero(np.isclose(sim.x0[:, 1], sim.x0[:, 1].max()))
@@ -196,10 +197,16 @@ def test_the_crack_elements_act_on_the_displacements_of_the_one_simulation_that_
         sim.step(ledger=True)
     sim.state.x[:] = sim.x0
     du = np.zeros_like(sim.x0)
-    du[top, 1] = 1e-4                       # the top row lifted: the crack elements under it open
+    node = int(sim.cracks.nodes[0, 3])       # one side of one crack element moved 1e-4 m
+    du[node] = [1e-4, 1e-4]
     sim.set_positions(displace=du)
-    sim.step(ledger=True)
-    assert sim.cracks.energy_terms()["crack_elastic"] > 0.0
+    normal, shear = sim.cracks.tractions()   # from the kept displacements
+    ref_normal, ref_shear = sim.cracks.tractions(sim.state.x.copy())   # from x - x0, a copy
+    moved = np.flatnonzero((sim.cracks.nodes == node).any(axis=1))
+    assert np.abs(normal[moved]).max() + np.abs(shear[moved]).max() > 0.0
+    np.testing.assert_allclose(normal, ref_normal, rtol=1e-6, atol=1e-6 * np.abs(ref_normal).max())
+    np.testing.assert_allclose(shear, ref_shear, rtol=1e-6, atol=1e-6 * np.abs(ref_shear).max())
+    sim.step(ledger=True)                    # the check passes
     from fdem.solve.simulation import Simulation
 
     other = Simulation(sim.model, providers=sim.providers, progress=False)
