@@ -296,6 +296,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
               **({"runout_step": workflow.runout_step} if workflow.runout_step != "bound" else {}),
               **({"equilibrium_ratio": workflow.equilibrium_ratio} if workflow.equilibrium_ratio != 1e-4 else {}),
               **({"equilibrium_hold": workflow.equilibrium_hold} if workflow.equilibrium_hold else {}),
+              **({"step_time": workflow.step_time} if workflow.step_time else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -388,6 +389,11 @@ def main(argv=None) -> dict:
                         help="response times the ratio must keep below its limit before a factor-of-safety trial "
                              "or reduction step counts as converged (default 0: the first check; a slope near its "
                              "factor creeps with its ratio dipping below a raised limit and rising again)")
+    parser.add_argument("--step-time", type=float, default=None, metavar="SECONDS",
+                        help="cap of every damped stage and factor-of-safety trial [s of simulated time] (default 5 "
+                             "response times, printed with the cost estimate); a trial that reaches its cap fails, "
+                             "and a search whose failing end was still settling there says so (fos.json "
+                             "leans_on_cap): longer trials tell whether it would have converged")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
     parser.add_argument("--runout-dt-fraction", type=float, default=0.8, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
@@ -458,7 +464,7 @@ def main(argv=None) -> dict:
         workflow = SlopeWorkflow(reduction=args.reduction, fos=tuple(args.fos) if args.fos else None,
                                  runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
                                  runout_step=args.runout_step, equilibrium_ratio=args.equilibrium_ratio,
-                                 equilibrium_hold=args.equilibrium_hold,
+                                 equilibrium_hold=args.equilibrium_hold, step_time=args.step_time,
                                  local_fall_area=args.local_fall_area or None)
     except ValueError as err:
         parser.error(str(err))

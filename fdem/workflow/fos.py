@@ -27,7 +27,7 @@ from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, ratio
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
-           "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve"]
+           "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve", "settling_at_cap", "SETTLING_SHARE"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -41,6 +41,11 @@ smallest (:data:`MIN_RELATIVE_TOL` of the upper end) bisection of a bracket ``[0
 needs ``log2(1e6) + 2 = 22`` trials; the cap leaves room above that, and a search that meets
 it says so (``FoSResult.ended_by``)."""
 
+
+SETTLING_SHARE = 0.9
+"""A trial at its cap reads as settling (:func:`settling_at_cap`) when its largest displacement
+grew less than this share in its last response time of what it grew in the one before: a
+tenth less each response time, clear of a steady creep's share of 1 and its scatter."""
 
 TRIALS_MARK = "fos_trials"
 """The journal mark (:attr:`fdem.workflow.journal.RunJournal.marks`) holding a search's finished
@@ -169,9 +174,13 @@ class Trial:
     """The history rows the trial made (``history.csv``; the restore after it drops them from
     ``sim.history``), kept for a replay from the run's journal."""
 
+    cap_trend: dict | None = None
+    """For a trial that reached its cap: whether it was still settling there
+    (:func:`settling_at_cap`); ``None`` otherwise, or without its rows."""
+
     def as_dict(self) -> dict:
         return {"factor": self.factor, "stable": self.stable, "time_capped": self.time_capped,
-                **self.result.as_dict()}
+                **self.result.as_dict(), **({"cap_trend": self.cap_trend} if self.cap_trend is not None else {})}
 
 
 @dataclass
@@ -199,9 +208,16 @@ class FoSResult:
     ended_by: str = "tolerance"
     max_trials: int = DEFAULT_MAX_TRIALS
 
+    @property
+    def leans_on_cap(self) -> bool:
+        """The bracket's failing end is a trial that reached its cap still settling
+        (:func:`settling_at_cap`): a longer cap might have found it stable and moved the factor up."""
+        failing = [t for t in self.trials if not t.stable and t.factor == self.bracket[1]]
+        return bool(failing and failing[0].cap_trend is not None and failing[0].cap_trend["settling"])
+
     def as_dict(self) -> dict:
         return {"fos": self.fos, "bracket": list(self.bracket), "tolerance": self.tolerance, "trigger": self.trigger,
-                "ended_by": self.ended_by, "max_trials": self.max_trials,
+                "ended_by": self.ended_by, "max_trials": self.max_trials, "leans_on_cap": self.leans_on_cap,
                 "n_trials": len(self.trials), "wall_seconds": self.wall_seconds,
                 "failure_surface_elements": int(self.failure_surface.size),
                 "failure_broken_elements": int(self.failure_broken.size),
@@ -442,6 +458,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
 
     def record(outcome, from_journal: bool = False) -> bool:
         t, info = outcome
+        t.cap_trend = _cap_trend(sim, t)
         trials.append(t)
         if info is not None and (not first_fail or t.factor < first_fail["factor"]):
             first_fail.clear()
@@ -568,6 +585,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                        max_trials=int(max_trials))
     if journal is not None:  # the search is whole: its caller records the result itself
         journal.marks.pop(TRIALS_MARK, None)
+    _tell_leaning_on_cap(sim, result)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -623,6 +641,81 @@ def trial_curve(factor: float, stable: bool, time, ratio, max_displacement, limi
     time, disp = np.asarray(time, float), np.asarray(max_displacement, float)
     return {"factor": factor, "stable": stable, "time": time - time[0], "ratio": np.asarray(ratio, float),
             "displacement": disp - disp[0], "limit": limit}
+
+
+def settling_at_cap(time, max_displacement, ratio, window: float, limit: float | None = None) -> dict | None:
+    """Whether a trial that reached its cap was still settling there, from its history rows.
+
+    Over the last two windows of ``window`` [s] (a response time): the growth of the largest displacement in the last window against the
+    one before, ``share = d_last / d_before``, and the fall of the unbalanced-force ratio,
+    ``ratio_fall = g_before / g_last`` (``g`` the geometric mean of the ratio over a window).
+    The trial is *settling* when both say so: ``share`` under :data:`SETTLING_SHARE` and
+    ``ratio_fall > 1``; a creeping slope keeps ``share`` at 1 or above. Were the growth to keep shrinking by ``share`` per
+    window, the slope would move a further ``d_last share / (1 - share)`` [m]
+    (``further_if_geometric``, a geometric series) and its ratio would meet ``limit`` after
+    ``log(g_last / limit) / log(ratio_fall) - (n - 1) / (2 n)`` more windows after the cap
+    (``windows_to_limit``; ``g_last`` is the ratio at the middle of the window's ``n`` rows). Both
+    are exact for a response that decays geometrically.
+
+    A reading of the trend, not a verdict: a slope that breaks elements one by one can settle
+    for a window and slip again (on the low-angle coarse four-slope scene at 1.0 m a trial
+    settling at its 5 T cap was still creeping at 15 T, ``docs/cases.md`` A). Returns ``None``
+    for a trial shorter than two windows (its first response time is the elastic answer to the
+    change of strength, which decays on a slope that then slides) or with fewer than four rows
+    a window."""
+    time = np.asarray(time, float)
+    disp = np.asarray(max_displacement, float)
+    ratio = np.asarray(ratio, float)
+    if time.size < 9:
+        return None
+    # a window is the last n rows (the checks are evenly spaced in time); its growth runs from
+    # the row before it to its last row
+    n = int(round(float(window) / float(np.median(np.diff(time)))))
+    if n < 4 or time.size < 2 * n + 1:
+        return None
+    d_last = float(disp[-1] - disp[-1 - n])
+    d_before = float(disp[-1 - n] - disp[-1 - 2 * n])
+    share = d_last / d_before if d_before > 0 else math.inf
+    r_last, r_before = ratio[-n:], ratio[-2 * n:-n]
+    if not (np.all(np.isfinite(r_last) & (r_last > 0)) and np.all(np.isfinite(r_before) & (r_before > 0))):
+        return None
+    g_last = float(np.exp(np.mean(np.log(r_last))))
+    g_before = float(np.exp(np.mean(np.log(r_before))))
+    fall = g_before / g_last
+    settling = bool(share < SETTLING_SHARE and fall > 1.0)
+    trend = {"window": float(window), "displacement_last": d_last, "displacement_before": d_before, "share": share,
+             "ratio_last": g_last, "ratio_before": g_before, "ratio_fall": fall, "settling": settling}
+    if settling:
+        trend["further_if_geometric"] = d_last * share / (1.0 - share)
+        if limit is not None and limit > 0:
+            trend["windows_to_limit"] = max(0.0, math.log(g_last / limit) / math.log(fall) - (n - 1) / (2.0 * n))
+    return trend
+
+
+def _cap_trend(sim: Simulation, t: Trial) -> dict | None:
+    """:func:`settling_at_cap` of a trial that ran to its cap, over windows of a response time."""
+    r = t.result
+    rows = [row for row in t.rows if "unbalanced_ratio" in row and "max_displacement" in row]
+    if r.reason != "capped" or not rows:
+        return None
+    return settling_at_cap([float(row["time"]) for row in rows], [float(row["max_displacement"]) for row in rows],
+                           [float(row["unbalanced_ratio"]) for row in rows],
+                           window=response_time(sim.model) * r.period_stretch, limit=r.ratio_limit)
+
+
+def _tell_leaning_on_cap(sim: Simulation, result: FoSResult) -> None:
+    """Warn when the bracket's failing end reached its cap still settling (``leans_on_cap``)."""
+    if not result.leans_on_cap:
+        return
+    t = next(t for t in result.trials if not t.stable and t.factor == result.bracket[1])
+    trend, r = t.cap_trend, t.result
+    T = response_time(sim.model) * r.period_stretch
+    warn(f"factor of safety: the bracket's failing end, F = {t.factor:.5g}, reached its cap of "
+         f"{r.t_end - r.t_start:.4g} s ({(r.t_end - r.t_start) / T:.3g} response times) still settling: its largest "
+         f"displacement grew {trend['share']:.2f} times as much in the last response time as in the one before, "
+         f"and its unbalanced ratio fell {trend['ratio_fall']:.2f}-fold (to {trend['ratio_last']:.3g}); the factor "
+         f"may lean on the cap: a search with longer trials (SlopeWorkflow and scene key step_time, "
+         f"fdem run four-slopes --step-time SECONDS) tells whether it would have converged")
 
 
 def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:

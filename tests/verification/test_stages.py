@@ -272,6 +272,42 @@ def test_a_held_equilibrium_rule_keeps_the_limit_equilibrium_factor(tmp_path):
     assert (tmp_path / "fos_trials.png").stat().st_size > 0
 
 
+def test_a_bracket_whose_failing_end_was_still_settling_at_its_cap_is_told_so(tmp_path, capsys):
+    """The planar slope at F = 1.4, 0.3 % above its Hoek-Bray factor (1.396), slides, but so
+    slowly that at a cap of 3 response times the decay of its elastic answer to the change of
+    strength still dominates: its displacement grew less in the last response time than in the
+    one before, its ratio fell, and the search whose failing end it is says that its factor may
+    lean on the cap (``fos.json`` ``leans_on_cap``, a warning naming the trial). Given 5 response
+    times the same trial reads as the slide it is (its growth as large as the response time
+    before's, to 5 %, its ratio no longer falling) and the search does not lean on its cap; a
+    clear slide (F = 1.8) never reads as settling."""
+    import json
+
+    from fdem.solve.geostatic import unbalanced_force_ratio
+    from fdem.workflow.fos import default_trial_stage, factor_of_safety
+
+    sim = planar_slope_scene().sim
+    sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)   # the trials' rows, as the workflow keeps them
+    T = response_time(sim.model)
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"]).fos
+    short = factor_of_safety(sim, lower=1.0, upper=1.4, tol=0.8, trial=default_trial_stage(sim, 1e-4, 3 * T),
+                             out_dir=tmp_path)
+    assert short.bracket == (1.0, 1.4) and le < 1.4 < 1.01 * le
+    at_cap = short.trials[1]
+    assert at_cap.result.reason == "capped" and at_cap.cap_trend["settling"], at_cap.cap_trend
+    assert at_cap.cap_trend["share"] < 0.9 and at_cap.cap_trend["ratio_fall"] > 1.0
+    assert short.leans_on_cap and json.loads((tmp_path / "fos.json").read_text())["leans_on_cap"] is True
+    assert "F = 1.4, reached its cap" in capsys.readouterr().out
+    longer = factor_of_safety(sim, lower=1.0, upper=1.4, tol=0.8, trial=default_trial_stage(sim, 1e-4, 5 * T))
+    trend = longer.trials[1].cap_trend
+    assert not trend["settling"] and trend["share"] == pytest.approx(1.0, abs=0.05) and trend["ratio_fall"] <= 1.0
+    assert not longer.leans_on_cap and "reached its cap" not in capsys.readouterr().out
+    slide = factor_of_safety(sim, lower=1.0, upper=1.8, tol=0.8, trial=default_trial_stage(sim, 1e-4, 3 * T))
+    assert slide.trials[1].result.reason == "capped" and not slide.trials[1].cap_trend["settling"]
+    assert not slide.leans_on_cap
+    sim.close()
+
+
 def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
     """The search's pictures come after its result: one that raises (a full disk, a broken
     plotting library) is told, and the search still returns its bracket with fos.json on disk;
