@@ -479,8 +479,9 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     """:func:`report_cost` for the slope workflow's runout stage at its cap and its own step
     (the longest stage by far: the quasi-static stages run density-scaled at a larger step); for
     a run whose analysis is the factor-of-safety search (``reduction = "none"``), the equilibrium
-    at F = 1 (capped at 10 response times) and the search at its most
-    (:func:`fdem.workflow.fos.most_trials` trials, each capped at 5 response times)."""
+    at F = 1 (capped at twice the workflow's ``step_time``, default 10 response times) and the
+    search at its most (:func:`fdem.workflow.fos.most_trials` trials, each capped at ``step_time``,
+    default 5 response times)."""
     import numpy as np
 
     from fdem.workflow.slope import runout_stage
@@ -490,10 +491,10 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
         from fdem.workflow.fos import most_trials
 
         trials = most_trials(*workflow.fos)
-        T = response_time(sim.model)
-        return report_cost(parser, sim, args, 10.0 * T + trials * 5.0 * T,
-                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {10.0 * T:.3g} s "
-                           f"and {trials} trials of up to {5.0 * T:.3g} s simulated")
+        cap = workflow.step_time or 5.0 * response_time(sim.model)
+        return report_cost(parser, sim, args, 2.0 * cap + trials * cap,
+                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {2.0 * cap:.3g} s "
+                           f"and {trials} trials of up to {cap:.3g} s simulated")
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     cap = runout_stage(workflow, response_time(sim.model), height, g).max_time

@@ -128,3 +128,26 @@ def test_peak_memory_follows_the_measured_peaks():
     for n, peak in measured.items():
         above = peak - cost.BASE_PEAK_BYTES
         assert cost.mesh_memory_bytes(n) - cost.BASE_PEAK_BYTES == pytest.approx(above, rel=0.1)
+
+
+def test_a_search_alone_is_priced_at_its_own_trial_cap(capsys):
+    """``reduction = "none"``: the equilibrium at F = 1 (twice the stage cap) and the search's
+    most trials, each at the workflow's ``step_time`` when it gives one, 5 response times when
+    not: the simulated seconds the estimate prices are those the run may take."""
+    import argparse
+    from types import SimpleNamespace
+
+    from fdem.cases.common import report_runout_cost
+    from fdem.workflow.fos import most_trials
+    from fdem.workflow.slope import SlopeWorkflow
+    from fdem.workflow.stages import response_time
+
+    sim = scene()
+    T = response_time(sim.model)
+    args = SimpleNamespace(yes=True, threads=1)
+    for step_time, cap in ((None, 5.0 * T), (3.7, 3.7)):
+        wf = SlopeWorkflow(reduction="none", fos=(1.0, 1.6, 0.04), step_time=step_time)
+        est = report_runout_cost(argparse.ArgumentParser(), sim, args, wf)
+        n = most_trials(1.0, 1.6, 0.04)
+        assert est["simulated_seconds"] == pytest.approx(2.0 * cap + n * cap, rel=1e-12), est
+        assert f"trials of up to {cap:.3g} s" in capsys.readouterr().out
