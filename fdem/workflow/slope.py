@@ -431,6 +431,9 @@ def _tell_searched(summary: dict) -> None:
     lo, hi = fos["bracket"]
     summary["ending"] = (f"factor of safety {fos['fos']:.4g} (stable at {lo:.4g}, not at {hi:.4g}; "
                          f"{fos['n_trials']} trials): the search was the analysis (reduction 'none')")
+    if fos.get("leans_on_cap"):
+        summary["ending"] += (f"; F = {hi:.4g} reached the trial cap still settling: the factor may lean on "
+                              f"the cap (longer trials, step_time, tell)")
 
 
 def beyond_bracket(err: BracketError, lower: float, upper: float) -> dict:

@@ -306,6 +306,10 @@ def test_a_bracket_whose_failing_end_was_still_settling_at_its_cap_is_told_so(tm
     assert slide.trials[1].result.reason == "capped" and not slide.trials[1].cap_trend["settling"]
     assert not slide.leans_on_cap
     sim.close()
+    # the workflow's search alone says so in its ending, with the trials at its step_time
+    summary = run_slope_workflow(planar_slope_scene().sim,
+                                 SlopeWorkflow(reduction="none", fos=(1.0, 1.4, 0.8), step_time=3 * T))
+    assert summary["fos"]["leans_on_cap"] and "may lean on the cap" in summary["ending"], summary["ending"]
 
 
 def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
