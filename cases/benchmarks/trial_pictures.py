@@ -4,7 +4,10 @@ A search run with an output folder draws ``fos_trials.png`` itself (each trial's
 ratio and displacement against its own time, :func:`fdem.io.pictures.trial_histories_plot`);
 this script draws the same picture for a run made before it did, from the run's ``history.csv``
 (the rows of each ``trial_F...`` stage), ``fos.json`` (each trial's verdict, and the raised
-limit its converged trials name in their ``detail``) and ``run.json`` (the rule's options):
+limit its converged trials name in their ``detail``) and ``run.json`` (the rule's options). A
+trial that reached its cap still settling (:func:`fdem.workflow.fos.settling_at_cap`) is drawn
+dashed: from its ``cap_trend`` where ``fos.json`` has one, else read from its rows over windows
+of a fifth of its cap (the default cap of 5 response times):
 
     python cases/benchmarks/trial_pictures.py runs/s46/lc1_eq2.8e-4_hold1 runs/s46/lc05_eq2.8e-4_hold1 \\
         --out docs/cases/convergence/rule --names low_coarse_1.0_offset0_eq2.8e-4_hold1 low_coarse_0.5_offset0_eq2.8e-4_hold1
@@ -22,7 +25,7 @@ import numpy as np
 
 from fdem.io.history import read_history
 from fdem.io.pictures import trial_histories_plot
-from fdem.workflow.fos import trial_curve
+from fdem.workflow.fos import settling_at_cap, trial_curve
 
 
 def option(argv: list[str], flag: str, default: float) -> float:
@@ -44,8 +47,14 @@ def curves_of(run: Path) -> tuple[list[dict], float, str]:
     for t in fos["trials"]:
         rows = stage == t["name"]
         if rows.any():  # the same curve a search draws of its own trials
-            curves.append(trial_curve(t["factor"], t["stable"], history["time"][rows],
-                                      history["unbalanced_ratio"][rows], history["max_displacement"][rows]))
+            curve = trial_curve(t["factor"], t["stable"], history["time"][rows],
+                                history["unbalanced_ratio"][rows], history["max_displacement"][rows])
+            trend = t.get("cap_trend")
+            if trend is None and t["reason"] == "capped" and "--step-time" not in argv:
+                trend = settling_at_cap(history["time"][rows], history["max_displacement"][rows],
+                                        history["unbalanced_ratio"][rows], window=(t["t_end"] - t["t_start"]) / 5.0)
+            curve["settling"] = bool(trend and trend["settling"])
+            curves.append(curve)
     hold = option(argv, "--equilibrium-hold", 0.0)
     size = option(argv, "--size", float("nan"))
     title = (f"{size:g} m: FoS {fos['fos']:.4g} ({fos['bracket'][0]:.4g}-{fos['bracket'][1]:.4g}), limit {limit:.3g}"

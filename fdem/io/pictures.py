@@ -722,7 +722,9 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
     there; one that creeps hovers near it while its displacement keeps growing.
     ``trials``: dicts with ``factor``, ``stable``, and arrays ``time`` [s] (since the trial's start),
     ``ratio`` and ``displacement`` [m] of equal length; optionally ``limit``, the trial's own limit
-    (drawn dotted in its colour) where the trials' limits differ."""
+    (drawn dotted in its colour) where the trials' limits differ, and ``settling``: a trial that
+    reached its cap still settling (:func:`fdem.workflow.fos.settling_at_cap`), drawn dashed and
+    labelled so, whose verdict leans on the cap."""
     from matplotlib import colormaps
 
     fig = new_figure((8.0, 6.0))
@@ -734,11 +736,14 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
             time, ratio, disp = (np.asarray(t[key], float) for key in ("time", "ratio", "displacement"))
             _same_length(time=time, ratio=ratio, displacement=disp)
             colour = shades[stable](0.45 + 0.5 * (k + 1) / len(group))
-            label = f"{trigger} = {t['factor']:.4g} {'stable' if stable else 'failing'}"
-            top.plot(time, ratio, color=colour, lw=1.1, label=label)
+            settling = bool(t.get("settling"))
+            label = f"{trigger} = {t['factor']:.4g} {'stable' if stable else 'failing'}" + (
+                " (capped, settling)" if settling else "")
+            style = "--" if settling else "-"
+            top.plot(time, ratio, color=colour, lw=1.1, ls=style, label=label)
             if t.get("limit") is not None:   # a trial's own limit, where the trials' differ
                 top.axhline(t["limit"], color=colour, ls=":", lw=0.8)
-            bottom.plot(time, disp, color=colour, lw=1.1)
+            bottom.plot(time, disp, color=colour, lw=1.1, ls=style)
     if limit is not None:
         top.axhline(limit, color="k", ls="--", lw=0.9,
                     label=f"limit {limit:.3g}" + (f", held {hold:.3g} s" if hold else ""))

@@ -628,9 +628,11 @@ def trial_curves(result: FoSResult) -> list[dict]:
     for t in result.trials:
         rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
         if rows:
-            curves.append(trial_curve(t.factor, t.stable, [float(r["time"]) for r in rows],
-                                      [float(r["unbalanced_ratio"]) for r in rows],
-                                      [float(r["max_displacement"]) for r in rows], t.result.ratio_limit))
+            curve = trial_curve(t.factor, t.stable, [float(r["time"]) for r in rows],
+                                [float(r["unbalanced_ratio"]) for r in rows],
+                                [float(r["max_displacement"]) for r in rows], t.result.ratio_limit)
+            curve["settling"] = bool(t.cap_trend and t.cap_trend["settling"])
+            curves.append(curve)
     return curves
 
 
