@@ -211,7 +211,9 @@ class FoSResult:
     @property
     def leans_on_cap(self) -> bool:
         """The bracket's failing end is a trial that reached its cap still settling
-        (:func:`settling_at_cap`): a longer cap might have found it stable and moved the factor up."""
+        (:func:`settling_at_cap`): a longer cap might have found it stable and moved the factor up.
+        ``False`` does not mean that the factor is the cap's own: a failing end that reached its
+        cap creeping can stop later too (each capped trial's ``cap_trend``, :func:`settling_at_cap`)."""
         failing = [t for t in self.trials if not t.stable and t.factor == self.bracket[1]]
         return bool(failing and failing[0].cap_trend is not None and failing[0].cap_trend["settling"])
 
@@ -659,9 +661,12 @@ def settling_at_cap(time, max_displacement, ratio, window: float, limit: float |
     (``windows_to_limit``; ``g_last`` is the ratio at the middle of the window's ``n`` rows). Both
     are exact for a response that decays geometrically.
 
-    A reading of the trend, not a verdict: a slope that breaks elements one by one can settle
-    for a window and slip again (on the low-angle coarse four-slope scene at 1.0 m a trial
-    settling at its 5 T cap was still creeping at 15 T, ``docs/cases.md`` A). Returns ``None``
+    A reading of the trend, not a verdict, either way: a slope that breaks elements one by one
+    can settle for a window and slip again (on the low-angle coarse four-slope scene at 1.0 m a
+    trial settling at its 5 T cap was still creeping at 15 T), and a creep can stop later (the
+    high-angle coarse scene at 1.0 m, F = 1.6, crept at a steady 1.3-1.4 cm per response time at
+    its 5 T cap, then slowed and converged at 9.3 T after 2 cm; ``docs/cases.md`` A). Only a
+    longer trial tells. Returns ``None``
     for a trial shorter than two windows (its first response time is the elastic answer to the
     change of strength, which decays on a slope that then slides) or with fewer than four rows
     a window."""
