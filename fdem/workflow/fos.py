@@ -664,8 +664,9 @@ def settling_at_cap(time, max_displacement, ratio, window: float, limit: float |
     A reading of the trend, not a verdict, either way: a slope that breaks elements one by one
     can settle for a window and slip again (on the low-angle coarse four-slope scene at 1.0 m a
     trial settling at its 5 T cap was still creeping at 15 T), and a creep can stop later (the
-    high-angle coarse scene at 1.0 m, F = 1.6, crept at a steady 1.3-1.4 cm per response time at
-    its 5 T cap, then slowed and converged at 9.3 T after 2 cm; ``docs/cases.md`` A). Only a
+    high-angle coarse scene at 1.0 m, F = 1.6, crept 1.8 and then 2.7 mm in the last two
+    response times before its 5 T cap, then slowed and converged at 9.3 T after 2.0 cm;
+    ``docs/cases.md`` A). Only a
     longer trial tells. Returns ``None``
     for a trial shorter than two windows (its first response time is the elastic answer to the
     change of strength, which decays on a slope that then slides) or with fewer than four rows
