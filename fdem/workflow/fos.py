@@ -650,12 +650,13 @@ def trial_curve(factor: float, stable: bool, time, ratio, max_displacement, limi
 def settling_at_cap(time, max_displacement, ratio, window: float, limit: float | None = None) -> dict | None:
     """Whether a trial that reached its cap was still settling there, from its history rows.
 
-    Over the last two windows of ``window`` [s] (a response time): the growth of the largest displacement in the last window against the
-    one before, ``share = d_last / d_before``, and the fall of the unbalanced-force ratio,
-    ``ratio_fall = g_before / g_last`` (``g`` the geometric mean of the ratio over a window).
-    The trial is *settling* when both say so: ``share`` under :data:`SETTLING_SHARE` and
-    ``ratio_fall > 1``; a creeping slope keeps ``share`` at 1 or above. Were the growth to keep shrinking by ``share`` per
-    window, the slope would move a further ``d_last share / (1 - share)`` [m]
+    Over the last two windows of ``window`` [s] (a response time): the growth of the largest
+    displacement in the last window against the one before, ``share = d_last / d_before``, and
+    the fall of the unbalanced-force ratio, ``ratio_fall = g_before / g_last`` (``g`` the
+    geometric mean of the ratio over a window). The trial is *settling* when both say so:
+    ``share`` under :data:`SETTLING_SHARE` and ``ratio_fall > 1``; a creeping slope keeps
+    ``share`` at 1 or above. Were the growth to keep shrinking by ``share`` per window, the
+    slope would move a further ``d_last share / (1 - share)`` [m]
     (``further_if_geometric``, a geometric series) and its ratio would meet ``limit`` after
     ``log(g_last / limit) / log(ratio_fall) - (n - 1) / (2 n)`` more windows after the cap
     (``windows_to_limit``; ``g_last`` is the ratio at the middle of the window's ``n`` rows). Both
@@ -666,9 +667,8 @@ def settling_at_cap(time, max_displacement, ratio, window: float, limit: float |
     trial settling at its 5 T cap was still creeping at 15 T), and a creep can stop later (the
     high-angle coarse scene at 1.0 m, F = 1.6, crept 1.8 and then 2.7 mm in the last two
     response times before its 5 T cap, then slowed and converged at 9.3 T after 2.0 cm;
-    ``docs/cases.md`` A). Only a
-    longer trial tells. Returns ``None``
-    for a trial shorter than two windows (its first response time is the elastic answer to the
+    ``docs/cases.md`` A). Only a longer trial tells. Returns ``None`` for a trial shorter than
+    two windows (its first response time is the elastic answer to the
     change of strength, which decays on a slope that then slides) or with fewer than four rows
     a window."""
     time = np.asarray(time, float)
