@@ -297,6 +297,11 @@ def test_a_bracket_whose_failing_end_was_still_settling_at_its_cap_is_told_so(tm
     assert at_cap.result.reason == "capped" and at_cap.cap_trend["settling"], at_cap.cap_trend
     assert at_cap.cap_trend["share"] < 0.9 and at_cap.cap_trend["ratio_fall"] > 1.0
     assert short.leans_on_cap and json.loads((tmp_path / "fos.json").read_text())["leans_on_cap"] is True
+    # the trials picture draws it dashed: its curve says so, and the picture was written
+    from fdem.workflow.fos import trial_curves
+
+    assert [c["settling"] for c in trial_curves(short) if c["factor"] == 1.4] == [True]
+    assert (tmp_path / "fos_trials.png").stat().st_size > 0
     assert "F = 1.4, reached its cap" in capsys.readouterr().out
     longer = factor_of_safety(sim, lower=1.0, upper=1.4, tol=0.8, trial=default_trial_stage(sim, 1e-4, 5 * T))
     trend = longer.trials[1].cap_trend
