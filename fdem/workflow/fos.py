@@ -27,7 +27,9 @@ from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, ratio
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
-           "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve", "settling_at_cap", "SETTLING_SHARE"]
+           "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve", "settling_at_cap", "SETTLING_SHARE",
+           "bracket_by_cap", "bracket_words", "SHORTEST_READ_CAP",
+           "DEFAULT_CAP_RESPONSE_TIMES"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -46,6 +48,15 @@ SETTLING_SHARE = 0.9
 """A trial at its cap reads as settling (:func:`settling_at_cap`) when its largest displacement
 grew less than this share in its last response time of what it grew in the one before: a
 tenth less each response time, clear of a steady creep's share of 1 and its scatter."""
+
+DEFAULT_CAP_RESPONSE_TIMES = 5.0
+"""The default cap of a trial, and of the slope workflow's damped stages (``step_time``), in
+response times (:func:`fdem.workflow.stages.response_time`)."""
+
+SHORTEST_READ_CAP = 2.0
+"""The shortest cap, in response times, at which :func:`bracket_by_cap` reads a search's trials:
+the first response time of a trial is the elastic answer to the change of strength, which
+decays on a slope that then slides, so shorter trials say nothing of the slope."""
 
 TRIALS_MARK = "fos_trials"
 """The journal mark (:attr:`fdem.workflow.journal.RunJournal.marks`) holding a search's finished
@@ -207,6 +218,9 @@ class FoSResult:
     wall_seconds: float = 0.0
     ended_by: str = "tolerance"
     max_trials: int = DEFAULT_MAX_TRIALS
+    by_cap: list = field(default_factory=list)
+    """The bracket the same trials give at caps of a half, a quarter, ... of theirs
+    (:func:`bracket_by_cap`), the trials' own cap last."""
 
     @property
     def leans_on_cap(self) -> bool:
@@ -222,7 +236,7 @@ class FoSResult:
                 "ended_by": self.ended_by, "max_trials": self.max_trials, "leans_on_cap": self.leans_on_cap,
                 "n_trials": len(self.trials), "wall_seconds": self.wall_seconds,
                 "failure_surface_elements": int(self.failure_surface.size),
-                "failure_broken_elements": int(self.failure_broken.size),
+                "failure_broken_elements": int(self.failure_broken.size), "by_cap": self.by_cap,
                 "trials": [t.as_dict() for t in self.trials]}
 
 
@@ -252,7 +266,7 @@ def default_trial_stage(sim: Simulation, equilibrium_ratio: float = 1e-4, max_ti
     (``damping``, default :func:`fundamental_damping`), so that its trials and its reduction
     steps judge a slope by one rule. ``hold_for`` [s]: the ratio must keep below its limit that
     long, check after check, before the trial counts as stable (default 0: the first check)."""
-    return Stage("trial", max_time=max_time or 5.0 * response_time(sim.model),
+    return Stage("trial", max_time=max_time or DEFAULT_CAP_RESPONSE_TIMES * response_time(sim.model),
                  converge=Convergence(unbalanced_ratio=equilibrium_ratio, hold_for=hold_for), fail=fail or Failure(),
                  damping=damping if damping is not None else fundamental_damping(sim))
 
@@ -585,9 +599,14 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                        failure_positions=first_fail.get("positions"), failure_mode=first_fail.get("mode"),
                        wall_seconds=time.perf_counter() - wall + replayed_wall, ended_by=ended_by,
                        max_trials=int(max_trials))
+    if trials and trial.duration is None and trial.max_time is not None:  # trials with a cap of their own
+        stretch = trials[0].result.period_stretch  # times of a density-scaled trial are the scaled model's
+        result.by_cap = bracket_by_cap([t.as_dict() for t in trials], response_time(sim.model) * stretch,
+                                       stretch * trial.max_time)
     if journal is not None:  # the search is whole: its caller records the result itself
         journal.marks.pop(TRIALS_MARK, None)
     _tell_leaning_on_cap(sim, result)
+    _tell_by_cap(result)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -698,6 +717,66 @@ def settling_at_cap(time, max_displacement, ratio, window: float, limit: float |
         if limit is not None and limit > 0:
             trend["windows_to_limit"] = max(0.0, math.log(g_last / limit) / math.log(fall) - (n - 1) / (2.0 * n))
     return trend
+
+
+def bracket_by_cap(trials: list[dict], window: float, cap: float) -> list[dict]:
+    """The bracket a search's trials give at shorter caps than their own: whether the factor of
+    safety depends on how long a trial may take to converge.
+
+    A trial steps the same whatever its cap until it stops, so trials capped at ``cap`` [s]
+    hold the verdicts of trials capped at any ``c < cap``: a trial is stable at ``c`` when it
+    converged within ``c`` (``t_end - t_start <= c``), and failing otherwise (one that failed by
+    displacement, or reached ``cap``, fails at every shorter cap too). Read at ``cap``, ``cap/2``,
+    ``cap/4``, ... down to :data:`SHORTEST_READ_CAP` response times (``window`` [s]), shortest
+    first. Each reading: ``cap_s``, ``cap_response_times``, the factors ``stable`` and ``failing``
+    there, ``bracket = [largest stable, smallest failing]`` (``None`` where no trial is stable,
+    or none failing: the factor lies below, or above, every factor tried), and ``ordered``, false
+    where a stable factor lies above a failing one (a creep that settled at a higher factor
+    than one that did not, within that cap).
+
+    ``trials``: :meth:`Trial.as_dict` of each (``factor``, ``stable``, ``reason``, ``t_start``,
+    ``t_end``, ``time_capped``; ``fos.json``'s ``trials``); trials the run's ``--max-time`` cut
+    have no verdict and are left out. At ``cap`` the reading is the search's own bracket when
+    the verdicts there are ordered. A bracket that moves from ``cap/2`` to ``cap`` is a factor
+    set by the trials' length (``docs/cases.md`` A, "The high-angle coarse factor against the
+    trial's cap"); one that does not is no proof that a longer cap would leave it (a creep can
+    stop later than any cap read here)."""
+    caps = [float(cap)]
+    while caps[-1] / 2.0 >= SHORTEST_READ_CAP * window * (1.0 - 1e-9):
+        caps.append(caps[-1] / 2.0)
+    judged = [t for t in trials if not t.get("time_capped")]
+    readings = []
+    for c in reversed(caps):
+        stable = sorted(float(t["factor"]) for t in judged
+                        if t["stable"] and t["t_end"] - t["t_start"] <= c * (1.0 + 1e-9))
+        failing = sorted(float(t["factor"]) for t in judged if float(t["factor"]) not in stable)
+        lo = stable[-1] if stable else None
+        hi = failing[0] if failing else None
+        readings.append({"cap_s": c, "cap_response_times": c / window, "stable": stable, "failing": failing,
+                         "bracket": [lo, hi], "ordered": lo is None or hi is None or lo < hi})
+    return readings
+
+
+def bracket_words(bracket: list) -> str:
+    """A bracket of :func:`bracket_by_cap` in words: ``lo-hi``, or below / above every factor tried."""
+    lo, hi = bracket
+    if lo is None:
+        return f"below {hi:.5g} (every trial failing)" if hi is not None else "no trials"
+    if hi is None:
+        return f"above {lo:.5g} (every trial stable)"
+    return f"{lo:.5g}-{hi:.5g}"
+
+
+def _tell_by_cap(result: FoSResult) -> None:
+    """One line: the bracket the search's trials give at its shorter caps, when any differs
+    from the trials' own (:func:`bracket_by_cap`)."""
+    if len(result.by_cap) < 2 or all(r["bracket"] == result.by_cap[-1]["bracket"] for r in result.by_cap):
+        return
+    say("factor of safety against the trials' length (the same trials read at shorter caps): "
+        + "; ".join(f"{r['cap_response_times']:.3g} T {bracket_words(r['bracket'])}"
+                    + ("" if r["ordered"] else " (not ordered: a stable factor above a failing one)")
+                    for r in result.by_cap)
+        + ": the factor moved with the cap, and may move further with longer trials")
 
 
 def _cap_trend(sim: Simulation, t: Trial) -> dict | None:

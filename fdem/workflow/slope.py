@@ -43,8 +43,8 @@ from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
 from fdem.solve.geostatic import crack_strength_check, rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import STEP_FROM, Convergence, Failure, Stage, response_time, run_stage
-from fdem.workflow.fos import (BracketError, GravityIncrease, check_bracket, default_trial_stage, factor_of_safety,
-                               fundamental_damping)
+from fdem.workflow.fos import (DEFAULT_CAP_RESPONSE_TIMES, BracketError, GravityIncrease, bracket_words, check_bracket, default_trial_stage,
+                               factor_of_safety, fundamental_damping)
 
 __all__ = ["reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures", "steps_bracket"]
@@ -254,7 +254,7 @@ def stage_rules(sim: Simulation, wf: SlopeWorkflow) -> StageRules:
     refused here, before any step (every trial and step would run to its cap and count as failing)."""
     T = response_time(sim.model)
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
-    step_time = wf.step_time or 5.0 * T
+    step_time = wf.step_time or DEFAULT_CAP_RESPONSE_TIMES * T
     hold = wf.equilibrium_hold * T
     if hold >= step_time:
         raise ValueError(f"SlopeWorkflow.equilibrium_hold: {wf.equilibrium_hold:g} response times ({hold:.4g} s) "
@@ -434,6 +434,12 @@ def _tell_searched(summary: dict) -> None:
     if fos.get("leans_on_cap"):
         summary["ending"] += (f"; F = {hi:.4g} reached the trial cap still settling: the factor may lean on "
                               f"the cap (longer trials, step_time, tell)")
+    by_cap = fos.get("by_cap") or []
+    if len(by_cap) > 1 and by_cap[-2]["bracket"] != by_cap[-1]["bracket"]:
+        summary["ending"] += (f"; read at half the trials' length ({by_cap[-2]['cap_response_times']:.3g} "
+                              f"response times) the same trials bracket it at {bracket_words(by_cap[-2]['bracket'])}: "
+                              f"the factor moves with the trials' length (fos.json by_cap; longer trials, "
+                              f"step_time, tell how far)")
 
 
 def beyond_bracket(err: BracketError, lower: float, upper: float) -> dict:

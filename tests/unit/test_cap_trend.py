@@ -51,3 +51,38 @@ def test_a_trial_shorter_than_two_response_times_is_not_read():
     slope that then slides: two windows are the least that tells a settling slope."""
     t, d, r = _rows(lambda t: 1e-3 * (1 - np.exp(-t)), lambda t: 1e-3 * np.exp(-t), n_windows=1.9)
     assert settling_at_cap(t, d, r, window=T) is None
+
+
+def _trial(factor, stable, length, reason=None, time_capped=False):
+    return {"factor": factor, "stable": stable, "t_start": 10.0, "t_end": 10.0 + length,
+            "reason": reason or ("converged" if stable else "capped"), "time_capped": time_capped}
+
+
+def test_the_bracket_at_shorter_caps_counts_a_trial_stable_only_once_it_converged():
+    """Trials of 20 response times read at 10, 5 and 2.5 T: a trial converged after 9.3 T is
+    failing at 5 T and stable at 10 T; one that failed by displacement at 19 T or reached the cap
+    is failing at every cap; a trial the run's --max-time cut is left out. The readings below
+    are worked by hand from those rules (the high-angle coarse trials of docs/cases.md A)."""
+    from fdem.workflow.fos import bracket_by_cap
+
+    trials = [_trial(1.6, True, 9.3 * T), _trial(3.4, False, 19.0 * T, reason="failed"),
+              _trial(2.5, True, 4.0 * T), _trial(2.9, False, 20.0 * T), _trial(2.7, True, 12.0 * T),
+              _trial(2.8, False, 3.0 * T, time_capped=True)]
+    by_cap = bracket_by_cap(trials, window=T, cap=20.0 * T)
+    assert [r["cap_response_times"] for r in by_cap] == pytest.approx([2.5, 5.0, 10.0, 20.0])
+    assert [r["bracket"] for r in by_cap] == [[None, 1.6], [2.5, 1.6], [2.5, 2.7], [2.7, 2.9]]
+    assert [r["ordered"] for r in by_cap] == [True, False, True, True]
+    assert by_cap[1]["stable"] == [2.5] and by_cap[1]["failing"] == [1.6, 2.7, 2.9, 3.4]
+    assert all(2.8 not in r["stable"] + r["failing"] for r in by_cap)
+
+
+def test_a_search_at_the_default_cap_is_read_at_half_of_it_and_no_shorter():
+    """5 T trials are read at 2.5 and 5 T; 3 T trials only at their own cap, the first response
+    times being the elastic answer to the change of strength (SHORTEST_READ_CAP)."""
+    from fdem.workflow.fos import SHORTEST_READ_CAP, bracket_by_cap
+
+    assert SHORTEST_READ_CAP == 2.0
+    trials = [_trial(1.0, True, 1.0 * T), _trial(1.5, False, 5.0 * T)]
+    assert [r["cap_response_times"] for r in bracket_by_cap(trials, T, 5.0 * T)] == pytest.approx([2.5, 5.0])
+    assert [r["cap_response_times"] for r in bracket_by_cap(trials, T, 3.0 * T)] == pytest.approx([3.0])
+    assert [r["cap_response_times"] for r in bracket_by_cap(trials, T, 4.0 * T)] == pytest.approx([2.0, 4.0])

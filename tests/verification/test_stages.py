@@ -317,6 +317,43 @@ def test_a_bracket_whose_failing_end_was_still_settling_at_its_cap_is_told_so(tm
     assert summary["fos"]["leans_on_cap"] and "may lean on the cap" in summary["ending"], summary["ending"]
 
 
+def test_the_same_trials_read_at_half_their_cap_give_the_verdicts_of_trials_that_short(capsys):
+    """A trial steps the same whatever its cap until it stops, so a search's trials read at a
+    shorter cap (``by_cap``, :func:`fdem.workflow.fos.bracket_by_cap`) must give the verdicts of
+    trials run to that cap. On the planar slope near its Hoek-Bray factor (1.396) the block
+    settles ever more slowly (at F = 1.397, 0.1 % above it, in 2.24 response times on this mesh):
+    a search of 4 T trials is read at 2 and 4 T, every factor it tried is run again capped at
+    2 T, and each verdict must match the 2 T reading; the 4 T reading is the search's own
+    bracket, within 1 % of Hoek-Bray."""
+    from fdem.solve.checkpoint import restore, snapshot
+    from fdem.solve.geostatic import unbalanced_force_ratio
+    from fdem.workflow.fos import StrengthReduction, _run_trial, default_trial_stage, factor_of_safety
+
+    sim = planar_slope_scene().sim
+    sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)
+    T = response_time(sim.model)
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"]).fos
+    start = snapshot(sim)
+    search = factor_of_safety(sim, lower=1.39, upper=1.45, tol=0.005, trial=default_trial_stage(sim, 1e-4, 4 * T))
+    half, whole = search.by_cap
+    assert half["cap_response_times"] == pytest.approx(2.0) and whole["cap_response_times"] == pytest.approx(4.0)
+    assert whole["bracket"] == list(search.bracket) and abs(search.fos - le) < 0.01 * le
+    short = default_trial_stage(sim, 1e-4, 2 * T)
+    for t in search.trials:
+        restore(sim, start)
+        again, _ = _run_trial(sim, StrengthReduction(), short, t.factor)
+        assert again.stable == (t.factor in half["stable"]), (t.factor, again.result.reason, half)
+    # near the limit the slowest stable trials need more than 2 T: the reading moved, and is told
+    assert half["bracket"] != whole["bracket"], search.by_cap
+    assert "factor of safety against the trials' length" in capsys.readouterr().out
+    sim.close()
+    # the workflow's search alone ends by saying so, its fos.json (in the summary) keeping the readings
+    summary = run_slope_workflow(planar_slope_scene().sim,
+                                 SlopeWorkflow(reduction="none", fos=(1.39, 1.45, 0.005), step_time=4 * T))
+    assert summary["fos"]["by_cap"] == search.as_dict()["by_cap"]
+    assert "the factor moves with the trials' length" in summary["ending"], summary["ending"]
+
+
 def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
     """The search's pictures come after its result: one that raises (a full disk, a broken
     plotting library) is told, and the search still returns its bracket with fos.json on disk;
