@@ -297,6 +297,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
               **({"equilibrium_ratio": workflow.equilibrium_ratio} if workflow.equilibrium_ratio != 1e-4 else {}),
               **({"equilibrium_hold": workflow.equilibrium_hold} if workflow.equilibrium_hold else {}),
               **({"step_time": workflow.step_time} if workflow.step_time else {}),
+              **({"trial_end": workflow.trial_end} if workflow.trial_end != "cap" else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -394,6 +395,11 @@ def main(argv=None) -> dict:
                              "response times, printed with the cost estimate); a trial that reaches its cap fails, "
                              "and a search whose failing end was still settling there says so (fos.json "
                              "leans_on_cap): longer trials tell whether it would have converged")
+    parser.add_argument("--trial-end", choices=["cap", "rest"], default="cap",
+                        help="what a factor-of-safety trial that reaches its cap (--step-time) says: 'cap' (default) "
+                             "it fails; 'rest' it is followed undamped, as the damped steps follow a stage that did "
+                             "not settle, and stands if it comes to rest having moved less than the failure "
+                             "displacement: the factor of a slope that creeps and stops, not of the cap")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
     parser.add_argument("--runout-dt-fraction", type=float, default=0.8, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "
@@ -465,7 +471,7 @@ def main(argv=None) -> dict:
                                  runout_time=args.runout_time, runout_dt_fraction=args.runout_dt_fraction,
                                  runout_step=args.runout_step, equilibrium_ratio=args.equilibrium_ratio,
                                  equilibrium_hold=args.equilibrium_hold, step_time=args.step_time,
-                                 local_fall_area=args.local_fall_area or None)
+                                 local_fall_area=args.local_fall_area or None, trial_end=args.trial_end)
     except ValueError as err:
         parser.error(str(err))
     if args.runout_step == "measured" and getattr(args, "backend", "cpu") != "cpu":

@@ -117,7 +117,7 @@ def workflow(s: dict):
     fields = {k: w[k] for k in ("reduction", "reduction_rate", "final_strength", "equilibrium_ratio",
                                 "equilibrium_hold", "step_time",
                                 "fail_displacement", "runout_time", "rest_kinetic_ratio", "runout_dt_fraction",
-                                "local_fall_area", "runout_step")}
+                                "local_fall_area", "runout_step", "trial_end")}
     if w["factors"] is not None:
         fields["factors"] = tuple(w["factors"])
     if w["fos"] is not None:

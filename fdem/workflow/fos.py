@@ -23,13 +23,14 @@ from pathlib import Path
 import numpy as np
 from fdem.solve.damping import Damping
 from fdem.solve.simulation import Simulation
-from fdem.workflow.stages import Convergence, Failure, Stage, StageResult, ratio_limit, response_time, run_stage
+from fdem.workflow.stages import (Convergence, Failure, Stage, StageResult, failure_displacement, ratio_limit,
+                                  response_time, run_stage)
 
 __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "BracketError", "most_trials", "fundamental_damping",
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
            "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve", "settling_at_cap", "SETTLING_SHARE",
            "bracket_by_cap", "bracket_words", "SHORTEST_READ_CAP",
-           "DEFAULT_CAP_RESPONSE_TIMES"]
+           "DEFAULT_CAP_RESPONSE_TIMES", "creep_verdict", "FOLLOW_SUFFIX"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -57,6 +58,10 @@ SHORTEST_READ_CAP = 2.0
 """The shortest cap, in response times, at which :func:`bracket_by_cap` reads a search's trials:
 the first response time of a trial is the elastic answer to the change of strength, which
 decays on a slope that then slides, so shorter trials say nothing of the slope."""
+
+FOLLOW_SUFFIX = "_rest"
+"""The name of a trial's follow to rest (:func:`factor_of_safety` ``follow``) is the trial's
+stage name with this suffix."""
 
 TRIALS_MARK = "fos_trials"
 """The journal mark (:attr:`fdem.workflow.journal.RunJournal.marks`) holding a search's finished
@@ -189,9 +194,15 @@ class Trial:
     """For a trial that reached its cap: whether it was still settling there
     (:func:`settling_at_cap`); ``None`` otherwise, or without its rows."""
 
+    follow: StageResult | None = None
+    """For a trial that reached its cap in a search that follows such trials to rest
+    (:func:`factor_of_safety` ``follow``): the undamped stage after it, whose end decided the
+    verdict (:func:`creep_verdict`); ``None`` otherwise."""
+
     def as_dict(self) -> dict:
         return {"factor": self.factor, "stable": self.stable, "time_capped": self.time_capped,
-                **self.result.as_dict(), **({"cap_trend": self.cap_trend} if self.cap_trend is not None else {})}
+                **self.result.as_dict(), **({"cap_trend": self.cap_trend} if self.cap_trend is not None else {}),
+                **({"follow": self.follow.as_dict()} if self.follow is not None else {})}
 
 
 @dataclass
@@ -229,7 +240,9 @@ class FoSResult:
         ``False`` does not mean that the factor is the cap's own: a failing end that reached its
         cap creeping can stop later too (each capped trial's ``cap_trend``, :func:`settling_at_cap`)."""
         failing = [t for t in self.trials if not t.stable and t.factor == self.bracket[1]]
-        return bool(failing and failing[0].cap_trend is not None and failing[0].cap_trend["settling"])
+        # a trial followed to rest was judged by its follow, not by its cap
+        return bool(failing and failing[0].follow is None and failing[0].cap_trend is not None
+                    and failing[0].cap_trend["settling"])
 
     def as_dict(self) -> dict:
         return {"fos": self.fos, "bracket": list(self.bracket), "tolerance": self.tolerance, "trigger": self.trigger,
@@ -308,34 +321,74 @@ class _TrialJournal:
         self.journal.current = None
 
 
+def creep_verdict(stage_reason: str, stage_displacement: float, follow_reason: str, follow_displacement: float,
+                  fail_displacement: float) -> str:
+    """What a damped stage that did not settle within its cap, followed undamped, says of the
+    slope: ``"crept"`` when the follow came to rest (``converged``) with less than the failure
+    displacement [m] moved in the two stages together (bounded by the sum of their largest node
+    displacements [m]): the slope crept and stood; ``"undecided"`` when the follow reached its
+    own cap with less than that moved; ``"failed"`` otherwise (the damped stage failed by the
+    rule itself, the motion reached the failure displacement, or the mass left the model).
+
+    The one rule of the slope workflow's damped reduction steps (:func:`fdem.workflow.slope._tell_creep`)
+    and of a search's trials followed to rest (:func:`factor_of_safety` ``follow``)."""
+    if stage_reason == "failed" or stage_displacement + follow_displacement >= fail_displacement:
+        return "failed"
+    return {"converged": "crept", "capped": "undecided"}.get(follow_reason, "failed")
+
+
+def _follow_stage_at(follow: Stage, trial: Stage, factor: float, remaining: float) -> Stage:
+    """The follow of the trial at ``factor``: named after it, failing once the motion since the
+    trial began could reach the failure displacement (``remaining`` [m] more)."""
+    return dataclasses.replace(follow, name=_trial_stage_at(trial, factor).name + FOLLOW_SUFFIX,
+                               fail=Failure(displacement=remaining))
+
+
 def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None, journal=None,
-               first_row: int | None = None) -> tuple[Trial, dict | None]:
+               first_row: int | None = None, follow: Stage | None = None, capped: StageResult | None = None,
+               on_follow=None) -> tuple[Trial, dict | None]:
     """One trial on ``sim`` (already restored to the starting state): the verdict (the stage
     converged, or ``judge(sim, result)`` when given), and for a failing trial what it broke
     (failure surface, broken elements, positions, modes).
+
+    ``follow`` (a stage, undamped): a trial that reaches its cap goes on in it, and its verdict
+    is :func:`creep_verdict`'s (stable when it crept and came to rest); ``on_follow(result)`` is
+    called with the capped trial's result before the follow begins. ``capped``: the trial's
+    result when it is resumed inside its follow (the trial stage is not run again).
 
     ``journal`` (a :class:`_TrialJournal`): the trial writes resumable checkpoints; one whose
     ``resume`` holds a runtime continues the trial from the restored mid-trial state, the
     factor already applied (applied again it would re-project damaged elements onto their
     envelope), its history rows from ``first_row`` on."""
-    if journal is None or journal.resume is None:
+    if capped is None and (journal is None or journal.resume is None):
         trigger.apply(sim, factor)
     first_row = len(sim.history) if first_row is None else first_row
-    result = run_stage(sim, _trial_stage_at(trial, factor), frames=False, journal=journal)
+    result = capped if capped is not None else run_stage(sim, _trial_stage_at(trial, factor), frames=False,
+                                                         journal=journal)
     stable = bool(judge(sim, result)) if judge is not None else result.reason == "converged"
+    followed = None
+    if follow is not None and result.reason == "capped" and not getattr(sim, "time_capped", False):
+        fail_d = failure_displacement(sim, trial.fail)
+        if on_follow is not None:
+            on_follow(result)
+        followed = run_stage(sim, _follow_stage_at(follow, trial, factor, fail_d - result.max_displacement),
+                             frames=False, journal=journal)
+        stable = creep_verdict(result.reason, result.max_displacement, followed.reason, followed.max_displacement,
+                               fail_d) == "crept"
     info = None
     cracks = sim.cracks
     if not stable and cracks is not None:
         info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
                     positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
     return Trial(factor, stable, result, time_capped=bool(getattr(sim, "time_capped", False)),
-                 rows=[dict(r) for r in sim.history[first_row:]]), info
+                 rows=[dict(r) for r in sim.history[first_row:]], follow=followed), info
 
 
 _WORKER: dict = {}
 
 
-def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float, judge=None):
+def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Stage, factor: float, judge=None,
+                  follow: Stage | None = None):
     """A trial in a worker process: build the scene once, load the equilibrium checkpoint, then
     restart every trial from it."""
     from fdem.solve.checkpoint import load_checkpoint, restore, snapshot
@@ -348,13 +401,13 @@ def _worker_trial(build, build_args: tuple, checkpoint: str, trigger, trial: Sta
         _WORKER.update(key=key, sim=sim, start=snapshot(sim))
     sim = _WORKER["sim"]
     restore(sim, _WORKER["start"])
-    return _run_trial(sim, trigger, trial, factor, judge)
+    return _run_trial(sim, trigger, trial, factor, judge, follow=follow)
 
 
 def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, tol: float = 0.01,
                      trial: Stage | None = None, trigger=None, out_dir=None, workers: int = 1,
                      build=None, build_args: tuple = (), max_trials: int = DEFAULT_MAX_TRIALS,
-                     judge=None, journal=None) -> FoSResult:
+                     judge=None, journal=None, follow: Stage | None = None) -> FoSResult:
     """Factor of safety by bisection on a trigger's factor (default strength reduction).
 
     ``sim`` must hold a state in equilibrium (a geostatic start or a converged stage); every
@@ -383,6 +436,15 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     stage then needs no converge rule. Without it a trial is stable when its stage converged.
     With ``workers > 1`` it must be picklable.
 
+    ``follow`` (an undamped stage, the slope workflow's runout stage): a trial that reaches its
+    cap is followed in it, and is stable when it came to rest having moved less than the failure
+    displacement in all (:func:`creep_verdict`, the rule of the slope workflow's damped steps),
+    instead of failing at its cap. A damped creep that would stop after any cap is then judged
+    by whether it stops, not by how long it takes: the high-angle four slopes creep for 10 T
+    and more at factors where the damped steps, followed to rest, find them standing
+    (``docs/cases.md`` A). Its verdicts do not read at shorter caps (no ``by_cap``). Not with
+    ``judge``.
+
     ``journal`` (a :class:`fdem.workflow.journal.RunJournal`): every finished trial is recorded
     in it (its verdict and stage result; the first failing trial's broken elements and positions
     for the picture) and the checkpoint is written, holding the search's start state. A trial
@@ -409,6 +471,9 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                          "simulation identical to sim (the workers restart trials from a checkpoint of sim)")
     trigger = trigger or StrengthReduction()
     trial = trial or default_trial_stage(sim)
+    if follow is not None and judge is not None:
+        raise ValueError("factor_of_safety: follow judges a capped trial by whether it comes to rest; a judged "
+                         "trial has its own verdict: give one or the other")
     if trial.converge is None and judge is None:
         raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
                          "or a judge of its end state")
@@ -427,6 +492,8 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         search["ratio"] = rule.unbalanced_ratio                          # another search; the default keeps
     if rule is not None and rule.hold_for:                              # the keys of checkpoints written before
         search["hold_for"] = rule.hold_for
+    if follow is not None:
+        search["follow"] = follow.name
     progress = None
     cut = None   # (factor, runtime, state) of a trial the checkpoint holds in progress
     start_file = None if journal is None or journal.path is None or workers > 1 else journal.path.with_name(START_NAME)
@@ -444,8 +511,11 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}
         running, runtime = progress.get("running"), journal.resume
         in_trial = runtime is not None and str(runtime.get("name", "")).startswith(f"{trial.name}_F")
+        own = None if running is None else _trial_stage_at(trial, float(running)).name
+        in_follow = in_trial and follow is not None and own is not None and runtime["name"] == own + FOLLOW_SUFFIX \
+            and progress.get("running_capped") is not None
         if in_trial and not (workers == 1 and judge is None and running is not None
-                             and runtime["name"] == _trial_stage_at(trial, float(running)).name):
+                             and (runtime["name"] == own or in_follow)):
             raise CheckpointMismatch(f"the checkpoint was written in the factor-of-safety trial {runtime['name']!r}, "
                              f"which this search ({workers} worker(s){', judged' if judge is not None else ''}, "
                              f"{search}) cannot go on with; resume with the options the run started with")
@@ -455,7 +525,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                              f"start the run again")
         if in_trial:  # the state loaded is the trial's, to go on with once the finished trials are replayed
             journal.resume = None
-            cut = (float(running), runtime, snapshot(sim))
+            keep = {f.name for f in dataclasses.fields(StageResult)}
+            capped_result = StageResult(**{k: v for k, v in progress["running_capped"].items() if k in keep}) \
+                if in_follow else None
+            cut = (float(running), runtime, snapshot(sim), capped_result)
         if not fresh and start_file is not None and start_file.is_file():
             # a resumed search starts from the state kept apart when it began, whatever state the
             # checkpoint holds (a trial's, or one written by a stop before the trial went on)
@@ -480,13 +553,19 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             first_fail.clear()
             first_fail.update(info)
         r = t.result
+        fw = t.follow
+        followed = "" if fw is None else (
+            f"; followed undamped, {'came to rest' if fw.reason == 'converged' else fw.reason} after "
+            f"{fw.t_end - fw.t_start:.3g} s, {r.max_displacement + fw.max_displacement:.3g} m at most in all, "
+            f"{fw.wall_seconds:.3g} s of wall time")
         say(f"factor of safety: trial {len(trials)} at {trigger.name} {t.factor:.5g}: "
             f"{'stable' if t.stable else 'failing'} ({r.reason} after {r.t_end - r.t_start:.3g} s, "
-            f"{r.wall_seconds:.3g} s of wall time{', replayed from the checkpoint' if from_journal else ''})")
+            f"{r.wall_seconds:.3g} s of wall time{followed}{', replayed from the checkpoint' if from_journal else ''})")
         if progress is not None and not from_journal:
             # the trial's verdict, and the search's start state, onto disk before the next trial
             # (a worker's rows never reached this run's history.csv: none to write again)
             progress.pop("running", None)
+            progress.pop("running_capped", None)
             progress["trials"].append({**t.as_dict(), "rows": t.rows if pool is None else []})
             progress["first_fail"] = dict(first_fail) if first_fail else None
             restore(sim, start)
@@ -498,8 +577,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         nonlocal replayed_wall
         d = replayed[factor]
         keep = {f.name for f in dataclasses.fields(StageResult)}
+        followed = d.get("follow")
         t = Trial(factor=factor, stable=bool(d["stable"]), time_capped=bool(d["time_capped"]),
-                  result=StageResult(**{k: v for k, v in d.items() if k in keep}), rows=list(d.get("rows", [])))
+                  result=StageResult(**{k: v for k, v in d.items() if k in keep}), rows=list(d.get("rows", [])),
+                  follow=None if followed is None else StageResult(**{k: v for k, v in followed.items() if k in keep}))
         sim.write_history_rows(t.rows)  # history.csv as the search never cut wrote it
         ff = progress["first_fail"]
         info = dict(ff) if ff is not None and not t.stable and float(ff["factor"]) == factor else None
@@ -524,15 +605,20 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         os.environ["NUMBA_NUM_THREADS"] = "1"
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
 
+    def on_follow(result: StageResult) -> None:
+        # the capped trial's result, for a resume inside its follow (the trial is not run again)
+        if progress is not None:
+            progress["running_capped"] = result.as_dict()
+
     def run_many(factors: list[float]) -> list[bool]:
         nonlocal cut
         verdicts = {f: replay(f) for f in factors if f in replayed}
         todo = [f for f in factors if f not in verdicts]
         if pool is None:
             for f in todo:
-                resume = None
+                resume = capped = None
                 if cut is not None and cut[0] == f:  # the trial the checkpoint holds: on from where it stopped
-                    _, resume, state = cut
+                    _, resume, state, capped = cut
                     restore(sim, state)
                     sim.write_history_rows(sim.history[len(start["history"]):])
                 else:
@@ -545,10 +631,11 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                 inside = journal is not None and judge is None
                 verdicts[f] = record(_run_trial(sim, trigger, trial, f, judge,
                                                 journal=_TrialJournal(journal, resume) if inside else None,
-                                                first_row=len(start["history"])))
+                                                first_row=len(start["history"]), follow=follow, capped=capped,
+                                                on_follow=on_follow))
         else:
-            futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge)
-                       for f in todo]
+            futures = [pool.submit(_worker_trial, build, tuple(build_args), str(checkpoint), trigger, trial, f, judge,
+                                   follow) for f in todo]
             for f, fut in zip(todo, futures):
                 verdicts[f] = record(fut.result())
         return [verdicts[f] for f in factors]
@@ -599,7 +686,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                        failure_positions=first_fail.get("positions"), failure_mode=first_fail.get("mode"),
                        wall_seconds=time.perf_counter() - wall + replayed_wall, ended_by=ended_by,
                        max_trials=int(max_trials))
-    if trials and trial.duration is None and trial.max_time is not None:  # trials with a cap of their own
+    if trials and trial.duration is None and trial.max_time is not None and follow is None:  # capped trials
         stretch = trials[0].result.period_stretch  # times of a density-scaled trial are the scaled model's
         result.by_cap = bracket_by_cap([t.as_dict() for t in trials], response_time(sim.model) * stretch,
                                        stretch * trial.max_time)
@@ -782,7 +869,8 @@ def _tell_by_cap(result: FoSResult) -> None:
 def _cap_trend(sim: Simulation, t: Trial) -> dict | None:
     """:func:`settling_at_cap` of a trial that ran to its cap, over windows of a response time."""
     r = t.result
-    rows = [row for row in t.rows if "unbalanced_ratio" in row and "max_displacement" in row]
+    rows = [row for row in t.rows if "unbalanced_ratio" in row and "max_displacement" in row
+            and row.get("stage", r.name) == r.name]   # not its follow's, when it had one
     if r.reason != "capped" or not rows:
         return None
     return settling_at_cap([float(row["time"]) for row in rows], [float(row["max_displacement"]) for row in rows],

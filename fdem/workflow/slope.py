@@ -43,10 +43,10 @@ from fdem.geometry.polygons import ground_surface, slope_crest, slope_toe
 from fdem.solve.geostatic import crack_strength_check, rayleigh_frequency, unbalanced_force_ratio
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import STEP_FROM, Convergence, Failure, Stage, response_time, run_stage
-from fdem.workflow.fos import (DEFAULT_CAP_RESPONSE_TIMES, BracketError, GravityIncrease, bracket_words, check_bracket, default_trial_stage,
-                               factor_of_safety, fundamental_damping)
+from fdem.workflow.fos import (DEFAULT_CAP_RESPONSE_TIMES, BracketError, GravityIncrease, bracket_words, check_bracket,
+                               creep_verdict, default_trial_stage, factor_of_safety, fundamental_damping)
 
-__all__ = ["reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
+__all__ = ["TRIAL_ENDS", "reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures", "steps_bracket"]
 
 
@@ -57,6 +57,10 @@ def reduction_steps(final_strength: float = 0.3, step: float = 0.1) -> tuple[flo
         raise ValueError(f"final_strength and step must lie in (0, 1), got {final_strength}, {step}")
     n = int(math.floor((1.0 - final_strength) / step + 1e-9))
     return tuple(1.0 / round(1.0 - k * step, 10) for k in range(1, n + 1))
+
+
+TRIAL_ENDS = ("cap", "rest")
+"""What a factor-of-safety trial that reaches its cap says (:attr:`SlopeWorkflow.trial_end`)."""
 
 
 @dataclass
@@ -110,6 +114,15 @@ class SlopeWorkflow:
         (docs/pareto.md); 0.8 takes half the steps of 0.4. A single two-body impact loses more of
         its energy at 0.8 (1.5 % with 4 elements across the body, against 0.25 % at 0.4): pass 0.4
         where impact energies themselves are the answer.
+    trial_end : what a factor-of-safety trial that reaches its cap (``step_time``) says:
+        ``"cap"`` (default) it fails, as in shear-strength-reduction practice; ``"rest"`` it is
+        followed undamped in the runout stage and stands when it comes to rest having moved less
+        than ``fail_displacement`` in all, fails otherwise: the rule the damped reduction steps
+        apply to a stage that did not settle (:func:`fdem.workflow.fos.creep_verdict`), so that
+        the search and the steps judge a slope alike. The high-angle four slopes creep for 10
+        response times and more at factors where they then stand: with ``"cap"`` their factor
+        is the cap's (``docs/cases.md`` A, "The high-angle coarse factor against the trial's
+        cap"). Strength searches only
     runout_step : what ``runout_dt_fraction`` multiplies: ``"bound"`` (default) the solver's
         combined bound on the critical step, or ``"measured"`` the critical step measured on the
         model when the runout starts (:attr:`fdem.workflow.stages.Stage.step_from`), 1.26-1.63
@@ -133,6 +146,7 @@ class SlopeWorkflow:
     trigger: str = "strength"
     local_fall_area: float | None = None
     runout_step: str = "bound"
+    trial_end: str = "cap"
 
     def __post_init__(self):
         """Every field checked, the message naming it: a negative time or displacement, an
@@ -174,6 +188,11 @@ class SlopeWorkflow:
                                                         and 0.0 < self.runout_dt_fraction <= 1.0):
             raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got "
                              f"{self.runout_dt_fraction!r}")
+        if self.trial_end not in TRIAL_ENDS:
+            raise ValueError(f"SlopeWorkflow.trial_end must be one of {', '.join(TRIAL_ENDS)}, got {self.trial_end!r}")
+        if self.trial_end == "rest" and self.trigger != "strength":
+            raise ValueError("SlopeWorkflow.trial_end = 'rest' follows the trials of a strength-reduction search; "
+                             "the gravity search's trials end at their cap: leave it 'cap'")
         if self.runout_step not in STEP_FROM:
             raise ValueError(f"SlopeWorkflow.runout_step must be one of {', '.join(STEP_FROM)}, got {self.runout_step!r}")
         if self.fos is not None:
@@ -362,8 +381,9 @@ def _run_stages(sim, wf, summary, record, cracks, rules, out_dir, journal) -> No
             # and reported; the schedule after it does not depend on it and goes on.
             def search():
                 try:
+                    follow = runout_stage(wf, T, height, g) if wf.trial_end == "rest" else None
                     return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
-                                            trial=trial_stage(sim, wf, rules)).as_dict()
+                                            trial=trial_stage(sim, wf, rules), follow=follow).as_dict()
                 except BracketError as err:
                     return beyond_bracket(err, lower, upper)
 
@@ -504,16 +524,16 @@ def _tell_creep(summary: dict, runout, fail_displacement: float) -> None:
     failure displacement moved, has not told a creep from a collapse: its outcome is
     ``undecided`` (``failed_at_factor`` kept: the factor at which the slope did not settle),
     with an ending that says so and how to decide it."""
-    if runout.reason not in ("converged", "capped") or len(summary["stages"]) < 2:
+    if len(summary["stages"]) < 2:
         return
     failing = summary["stages"][-2]
-    if failing.get("reason") == "failed":  # the failing stage itself saw a node move the failure displacement
+    verdict = creep_verdict(failing.get("reason"), float(failing["max_displacement"]), runout.reason,
+                            float(runout.max_displacement), fail_displacement)
+    if verdict == "failed":
         return
     creep = float(failing["max_displacement"]) + float(runout.max_displacement)
-    if creep >= fail_displacement:
-        return
     factor = summary["failed_at_factor"]
-    if runout.reason == "capped":
+    if verdict == "undecided":
         summary["outcome"] = "undecided"
         summary["ending"] = (f"did not settle at F = {factor:.4g}, and the runout was capped at t = {runout.t_end:.4g} s "
                              f"after {creep:.3g} m, less than the failure displacement ({fail_displacement:.3g} m): "

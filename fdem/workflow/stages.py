@@ -295,6 +295,15 @@ class StageResult:
 
 
 # ----------------------------------------------------------------------------- helpers
+def failure_displacement(sim: Simulation, fail: Failure | None) -> float | None:
+    """The displacement [m] at which ``fail`` fires on ``sim``: its own, 1 % of the model
+    height when it gives neither a displacement nor a speed, ``None`` when it gives only a
+    speed or there is no rule."""
+    if fail is None or (fail.displacement is None and fail.speed is not None):
+        return None
+    return fail.displacement if fail.displacement is not None else 0.01 * float(np.ptp(sim.model.topology.x0[:, 1]))
+
+
 def response_time(model) -> float:
     """Fundamental period ``T = 4 H / c_s`` [s] of the model as a shear beam on a rigid base:
     ``H`` the vertical extent of the reference mesh [m], ``c_s = sqrt(mu / rho)`` the slowest
@@ -492,11 +501,8 @@ def run_stage(sim: Simulation, stage: Stage, frames: bool = True, journal=None) 
         base = np.asarray(stage.base_gravity if stage.base_gravity is not None else sim.model.gravity, float)
         sim.set_gravity(*(stage.gravity_factor * base))
     nodes = _monitor_nodes(sim, stage.monitor)
-    height = float(np.ptp(sim.model.topology.x0[:, 1]))
     fail = stage.fail
-    fail_disp = None
-    if fail is not None:
-        fail_disp = fail.displacement if (fail.displacement is not None or fail.speed is not None) else 0.01 * height
+    fail_disp = failure_displacement(sim, fail)
     damping = stage.damping
     quasi_static = damping.mass_proportional != 0.0 or damping.local != 0.0
     want_scaled = quasi_static if stage.density_scaling is None else stage.density_scaling

@@ -354,6 +354,42 @@ def test_the_same_trials_read_at_half_their_cap_give_the_verdicts_of_trials_that
     assert "the factor moves with the trials' length" in summary["ending"], summary["ending"]
 
 
+def test_trials_followed_to_rest_give_the_bracket_of_trials_long_enough_to_converge(capsys):
+    """A trial that reaches its cap neither stood nor failed. Followed undamped to rest, as the
+    damped reduction steps follow a stage that did not settle (``follow``,
+    :func:`fdem.workflow.fos.creep_verdict`), it is judged by whether the slope stops: on the
+    planar slope with trials of only 2 response times, F = 1.3975 (0.1 % above Hoek-Bray's
+    1.396, settling in 2.24 T) is capped and, followed, comes to rest within a millimetre,
+    so stands; the factors above slide to the failure displacement. The bracket is the one
+    trials of 4 T give by convergence alone (the test above), and within 1 % of Hoek-Bray; the
+    cap's own rule at 2 T gives 1.39-1.3975. A search so judged does not lean on its cap and
+    does not read its trials at shorter caps."""
+    from fdem.solve.geostatic import unbalanced_force_ratio
+    from fdem.workflow.fos import default_trial_stage, factor_of_safety
+
+    sim = planar_slope_scene().sim
+    sim.add_monitor("unbalanced_ratio", unbalanced_force_ratio)
+    T = response_time(sim.model)
+    H = float(np.ptp(sim.model.topology.x0[:, 1]))
+    le = pf.analytic(**pf.GEOMETRIES["no_crack"]).fos
+    follow = runout_stage(SlopeWorkflow(), T, H, 9.81)
+    short = default_trial_stage(sim, 1e-4, 2 * T)
+    rest = factor_of_safety(sim, lower=1.39, upper=1.41, tol=0.0025, trial=short, follow=follow)
+    capped = factor_of_safety(sim, lower=1.39, upper=1.41, tol=0.0025, trial=short)
+    longer = factor_of_safety(sim, lower=1.39, upper=1.41, tol=0.0025, trial=default_trial_stage(sim, 1e-4, 4 * T))
+    assert rest.bracket == longer.bracket != capped.bracket, (rest.bracket, longer.bracket, capped.bracket)
+    assert capped.bracket[1] == rest.bracket[0] and abs(rest.fos - le) < 0.01 * le
+    crept = next(t for t in rest.trials if t.factor == rest.bracket[0])
+    assert crept.stable and crept.result.reason == "capped" and crept.follow.reason == "converged"
+    assert crept.result.max_displacement + crept.follow.max_displacement < 0.01 * 0.01 * H   # under a millimetre
+    for t in rest.trials:
+        if not t.stable:   # each slid to the failure displacement (1 % of the height), followed or not
+            assert t.follow.reason == "failed" and t.result.max_displacement + t.follow.max_displacement >= 0.01 * H
+    assert not rest.leans_on_cap and rest.by_cap == [] and rest.as_dict()["trials"][1]["follow"]["reason"] == "failed"
+    assert "followed undamped, came to rest" in capsys.readouterr().out
+    sim.close()
+
+
 def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
     """The search's pictures come after its result: one that raises (a full disk, a broken
     plotting library) is told, and the search still returns its bracket with fos.json on disk;
@@ -456,16 +492,18 @@ def test_parallel_trials_restart_from_a_checkpoint_and_agree_with_limit_equilibr
         factor_of_safety(sim, workers=2)
 
 
-def _search_killed_in_its_third_trial(tmp_path, monkeypatch, every_seconds=None):
+def _search_killed_in_its_third_trial(tmp_path, monkeypatch, every_seconds=None, wf=None,
+                                      counted=lambda stage: stage.startswith("trial"), kill_in: int = 3):
     """The planar slope's workflow (a search over 1.0-2.0 to 0.1, then a step that holds) run whole
     into ``tmp_path/whole``, then again into ``tmp_path/cut`` with a journal (periodic checkpoints
     every ``every_seconds``) and killed on the fifth row of its third trial, as a SIGKILL would
     (no handler runs). Returns ``(wf, whole summary, whole sim, factors of the cut run's trials,
-    the cut run's folder, the real _run_trial)``."""
+    the cut run's folder, the real _run_trial)``. ``wf``: another workflow; ``counted``: which
+    stages' rows count toward the fifth (default: the trial's); ``kill_in``: the trial killed."""
     from fdem.workflow import fos as fos_module
     from fdem.workflow.journal import RunJournal
 
-    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))
+    wf = wf or SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 0.1))
     whole_sim = planar_slope_scene(out_dir=tmp_path / "whole", pictures=False).sim
     whole = run_slope_workflow(whole_sim, wf)
     whole_sim.close()
@@ -477,11 +515,11 @@ def _search_killed_in_its_third_trial(tmp_path, monkeypatch, every_seconds=None)
 
     def killed_in_the_third(sim, *args, **kwargs):
         calls.append(args[2])
-        if len(calls) == 3:  # partway through its steps
+        if len(calls) == kill_in:  # partway through its steps
             record_row = sim._record_row
 
             def dies_on_the_fifth_row(*a, **k):
-                if sum(1 for r in sim.history if r["stage"].startswith("trial")) >= 5:
+                if sum(1 for r in sim.history if counted(r["stage"])) >= 5:
                     raise Killed
                 return record_row(*a, **k)
 
@@ -599,6 +637,50 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     again = run_slope_workflow(sim, wf, journal=journal)
     sim.close()
     _assert_same_search(whole, whole_sim, again, sim, tmp_path / "whole", early)
+
+
+def test_a_trial_cut_inside_its_follow_to_rest_goes_on_from_there(tmp_path, monkeypatch):
+    """A trial followed to rest (``trial_end = "rest"``) is two stages; killed on the fifth row
+    of the follow of its upper end (F = 2.0, capped, then sliding undamped), the run's
+    checkpoint holds the follow (its runtime, and the capped trial's result in the search's
+    progress), and resumed it runs only the rest of the follow, not the trial again, and ends
+    as the run never cut: the same trials, verdicts and follows, the same state to the bit,
+    the same history.csv."""
+    from fdem.solve.checkpoint import read_checkpoint
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.journal import RunJournal
+
+    wf = SlopeWorkflow(factors=(1.1,), fos=(1.0, 2.0, 1.0), trial_end="rest")
+    wf, whole, whole_sim, calls, out, run_trial = _search_killed_in_its_third_trial(
+        tmp_path, monkeypatch, every_seconds=1e-9, wf=wf, kill_in=2,
+        counted=lambda stage: stage.endswith(fos_module.FOLLOW_SUFFIX))
+    upper = whole["fos"]["trials"][1]
+    assert upper["reason"] == "capped" and upper["follow"]["reason"] == "failed"   # F = 2.0 slides
+    context = read_checkpoint(out / "checkpoint.npz")["context"]
+    assert context["stage"]["name"] == f"trial_F{upper['factor']:.4f}{fos_module.FOLLOW_SUFFIX}"
+    assert context["marks"][fos_module.TRIALS_MARK]["running_capped"]["steps"] == upper["steps"]
+    stopped_at = read_checkpoint(out / "checkpoint.npz")["state"]["step"]
+
+    calls.clear()
+    steps_run = []
+
+    def counted(sim, *a, **k):
+        calls.append(a[2])
+        step = sim.state.step
+        outcome = run_trial(sim, *a, **k)
+        steps_run.append(sim.state.step - step)
+        return outcome
+
+    monkeypatch.setattr(fos_module, "_run_trial", counted)
+    sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    journal = RunJournal.resume_from(sim, out / "checkpoint.npz", every_seconds=1e-9)
+    sim.continue_outputs()
+    resumed = run_slope_workflow(sim, wf, journal=journal)
+    sim.close()
+    assert calls == [upper["factor"]]   # only the upper end, from inside its follow
+    assert 0 < steps_run[0] < upper["follow"]["steps"]   # the rest of the follow, not the trial again
+    assert stopped_at > 0 and resumed["fos"]["trials"][1]["follow"]["steps"] == upper["follow"]["steps"]
+    _assert_same_search(whole, whole_sim, resumed, sim, tmp_path / "whole", out)
 
 
 def test_a_checkpoint_inside_a_trial_is_refused_by_a_search_that_cannot_go_on_with_it(tmp_path):
