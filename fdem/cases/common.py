@@ -487,17 +487,21 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     from fdem.workflow.slope import runout_stage
     from fdem.workflow.stages import response_time
 
-    if workflow.reduction == "none":
-        from fdem.workflow.fos import most_trials
-
-        trials = most_trials(*workflow.fos)
-        cap = workflow.step_time or 5.0 * response_time(sim.model)
-        return report_cost(parser, sim, args, 2.0 * cap + trials * cap,
-                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {2.0 * cap:.3g} s "
-                           f"and {trials} trials of up to {cap:.3g} s simulated")
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
-    cap = runout_stage(workflow, response_time(sim.model), height, g).max_time
+    runout_cap = runout_stage(workflow, response_time(sim.model), height, g).max_time
+    if workflow.reduction == "none":
+        from fdem.workflow.fos import DEFAULT_CAP_RESPONSE_TIMES, most_trials
+
+        trials = most_trials(*workflow.fos)
+        cap = workflow.step_time or DEFAULT_CAP_RESPONSE_TIMES * response_time(sim.model)
+        # a trial followed to rest goes on, undamped, for at most the runout's cap
+        follow = runout_cap if workflow.trial_end == "rest" else 0.0
+        return report_cost(parser, sim, args, 2.0 * cap + trials * (cap + follow),
+                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {2.0 * cap:.3g} s "
+                           f"and {trials} trials of up to {cap:.3g} s simulated"
+                           + (f", each followed to rest for up to {follow:.3g} s more" if follow else ""))
+    cap = runout_cap
     return report_cost(parser, sim, args, cap, f"the runout stage, up to {cap:.3g} s simulated",
                        dt_fraction=workflow.runout_dt_fraction, step_from=workflow.runout_step)
 

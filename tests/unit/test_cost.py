@@ -151,3 +151,26 @@ def test_a_search_alone_is_priced_at_its_own_trial_cap(capsys):
         n = most_trials(1.0, 1.6, 0.04)
         assert est["simulated_seconds"] == pytest.approx(2.0 * cap + n * cap, rel=1e-12), est
         assert f"trials of up to {cap:.3g} s" in capsys.readouterr().out
+
+
+def test_a_search_followed_to_rest_is_priced_with_each_trial_s_follow(capsys):
+    """``trial_end = "rest"``: every trial may go on, undamped, for the runout's cap after its
+    own, and the estimate prices that at its most (the follow is the runout stage)."""
+    import argparse
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from fdem.cases.common import report_runout_cost
+    from fdem.workflow.fos import most_trials
+    from fdem.workflow.slope import SlopeWorkflow, runout_stage
+    from fdem.workflow.stages import response_time
+
+    sim = scene()
+    T = response_time(sim.model)
+    wf = SlopeWorkflow(reduction="none", fos=(1.0, 1.6, 0.04), step_time=3.7, trial_end="rest", runout_time=9.0)
+    follow = runout_stage(wf, T, float(np.ptp(sim.model.topology.x0[:, 1])), 9.81).max_time
+    assert follow == 9.0
+    est = report_runout_cost(argparse.ArgumentParser(), sim, SimpleNamespace(yes=True, threads=1), wf)
+    assert est["simulated_seconds"] == pytest.approx(2.0 * 3.7 + most_trials(1.0, 1.6, 0.04) * (3.7 + 9.0), rel=1e-12)
+    assert "each followed to rest for up to 9 s more" in capsys.readouterr().out
