@@ -454,6 +454,12 @@ def _tell_searched(summary: dict) -> None:
     if fos.get("leans_on_cap"):
         summary["ending"] += (f"; F = {hi:.4g} reached the trial cap still settling: the factor may lean on "
                               f"the cap (longer trials, step_time, tell)")
+    followed = [t for t in fos.get("trials", []) if t.get("follow")]
+    if followed:
+        stood = [t["factor"] for t in followed if t["stable"]]
+        summary["ending"] += (f"; {len(followed)} trial(s) reached their cap and were followed undamped to rest, "
+                              + (f"standing at F = {', '.join(f'{f:.4g}' for f in sorted(stood))} after creeping"
+                                 if stood else "none coming to rest short of the failure displacement"))
     by_cap = fos.get("by_cap") or []
     if len(by_cap) > 1 and by_cap[-2]["bracket"] != by_cap[-1]["bracket"]:
         summary["ending"] += (f"; read at half the trials' length ({by_cap[-2]['cap_response_times']:.3g} "

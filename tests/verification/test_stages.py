@@ -388,6 +388,11 @@ def test_trials_followed_to_rest_give_the_bracket_of_trials_long_enough_to_conve
     assert not rest.leans_on_cap and rest.by_cap == [] and rest.as_dict()["trials"][1]["follow"]["reason"] == "failed"
     assert "followed undamped, came to rest" in capsys.readouterr().out
     sim.close()
+    # the workflow's search alone so judged says which trials crept and stood
+    summary = run_slope_workflow(planar_slope_scene().sim, SlopeWorkflow(reduction="none", fos=(1.39, 1.41, 0.0025),
+                                                                        step_time=2 * T, trial_end="rest"))
+    assert summary["fos"]["bracket"] == list(rest.bracket)
+    assert f"standing at F = {rest.bracket[0]:.4g} after creeping" in summary["ending"], summary["ending"]
 
 
 def test_a_picture_that_cannot_be_drawn_does_not_lose_the_search(tmp_path, monkeypatch):
