@@ -555,6 +555,31 @@ def _assert_same_search(whole, whole_sim, resumed, sim, whole_dir, resumed_dir):
     assert (whole_dir / "history.csv").read_bytes() == (resumed_dir / "history.csv").read_bytes()
 
 
+def _resumed_counting_trials(monkeypatch, run_trial, out, wf):
+    """The cut run in ``out`` resumed (periodic checkpoints at every row) on a fresh simulation,
+    counting the trials it runs and the steps each advanced. Returns ``(summary, sim, factors,
+    steps)``."""
+    from fdem.workflow import fos as fos_module
+    from fdem.workflow.journal import RunJournal
+
+    calls, steps = [], []
+
+    def counted(sim, *a, **k):
+        calls.append(a[2])
+        step = sim.state.step
+        outcome = run_trial(sim, *a, **k)
+        steps.append(sim.state.step - step)
+        return outcome
+
+    monkeypatch.setattr(fos_module, "_run_trial", counted)
+    sim = planar_slope_scene(out_dir=out, pictures=False).sim
+    journal = RunJournal.resume_from(sim, out / "checkpoint.npz", every_seconds=1e-9)
+    sim.continue_outputs()
+    summary = run_slope_workflow(sim, wf, journal=journal)
+    sim.close()
+    return summary, sim, calls, steps
+
+
 def test_a_search_cut_short_goes_on_from_its_last_finished_trial(tmp_path, monkeypatch):
     """A bisection of hours must not be lost to the end of a session. Killed halfway through its
     third trial (no handler runs: the checkpoint on disk is the one written after the second),
@@ -612,22 +637,7 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
     save_checkpoint(probe, early / "checkpoint.npz", context={**context, "stage": None})
     probe.close()
 
-    calls.clear()
-    resumed_steps = []
-
-    def counted(sim, *a, **k):
-        calls.append(a[2])
-        step = sim.state.step
-        outcome = run_trial(sim, *a, **k)
-        resumed_steps.append(sim.history[-1]["step"] - step)
-        return outcome
-
-    monkeypatch.setattr(fos_module, "_run_trial", counted)
-    sim = planar_slope_scene(out_dir=out, pictures=False).sim
-    journal = RunJournal.resume_from(sim, out / "checkpoint.npz", every_seconds=1e-9)
-    sim.continue_outputs()
-    resumed = run_slope_workflow(sim, wf, journal=journal)
-    sim.close()
+    resumed, sim, calls, resumed_steps = _resumed_counting_trials(monkeypatch, run_trial, out, wf)
     assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]
     assert 0 < resumed_steps[0] < third["steps"]   # the third trial went on, it did not start again
     _assert_same_search(whole, whole_sim, resumed, sim, tmp_path / "whole", out)
@@ -666,22 +676,7 @@ def test_a_trial_cut_inside_its_follow_to_rest_goes_on_from_there(tmp_path, monk
     assert context["marks"][fos_module.TRIALS_MARK]["running_capped"]["steps"] == upper["steps"]
     stopped_at = read_checkpoint(out / "checkpoint.npz")["state"]["step"]
 
-    calls.clear()
-    steps_run = []
-
-    def counted(sim, *a, **k):
-        calls.append(a[2])
-        step = sim.state.step
-        outcome = run_trial(sim, *a, **k)
-        steps_run.append(sim.state.step - step)
-        return outcome
-
-    monkeypatch.setattr(fos_module, "_run_trial", counted)
-    sim = planar_slope_scene(out_dir=out, pictures=False).sim
-    journal = RunJournal.resume_from(sim, out / "checkpoint.npz", every_seconds=1e-9)
-    sim.continue_outputs()
-    resumed = run_slope_workflow(sim, wf, journal=journal)
-    sim.close()
+    resumed, sim, calls, steps_run = _resumed_counting_trials(monkeypatch, run_trial, out, wf)
     assert calls == [upper["factor"]]   # only the upper end, from inside its follow
     assert 0 < steps_run[0] < upper["follow"]["steps"]   # the rest of the follow, not the trial again
     assert stopped_at > 0 and resumed["fos"]["trials"][1]["follow"]["steps"] == upper["follow"]["steps"]
