@@ -199,10 +199,15 @@ class Trial:
     (:func:`factor_of_safety` ``follow``): the undamped stage after it, whose end decided the
     verdict (:func:`creep_verdict`); ``None`` otherwise."""
 
+    follow_verdict: str | None = None
+    """:func:`creep_verdict` of a followed trial: ``crept`` (stable), ``failed`` or
+    ``undecided`` (the follow reached its own cap short of the failure displacement; counted failing)."""
+
     def as_dict(self) -> dict:
         return {"factor": self.factor, "stable": self.stable, "time_capped": self.time_capped,
                 **self.result.as_dict(), **({"cap_trend": self.cap_trend} if self.cap_trend is not None else {}),
-                **({"follow": self.follow.as_dict()} if self.follow is not None else {})}
+                **({"follow": self.follow.as_dict(), "follow_verdict": self.follow_verdict}
+                   if self.follow is not None else {})}
 
 
 @dataclass
@@ -240,9 +245,11 @@ class FoSResult:
         ``False`` does not mean that the factor is the cap's own: a failing end that reached its
         cap creeping can stop later too (each capped trial's ``cap_trend``, :func:`settling_at_cap`)."""
         failing = [t for t in self.trials if not t.stable and t.factor == self.bracket[1]]
-        # a trial followed to rest was judged by its follow, not by its cap
-        return bool(failing and failing[0].follow is None and failing[0].cap_trend is not None
-                    and failing[0].cap_trend["settling"])
+        # a trial followed to rest was judged by its follow, not by its cap: it leans on the
+        # runout's cap when its follow ended there short of the failure displacement
+        if failing and failing[0].follow is not None:
+            return failing[0].follow_verdict == "undecided"
+        return bool(failing and failing[0].cap_trend is not None and failing[0].cap_trend["settling"])
 
     def as_dict(self) -> dict:
         return {"fos": self.fos, "bracket": list(self.bracket), "tolerance": self.tolerance, "trigger": self.trigger,
@@ -366,22 +373,24 @@ def _run_trial(sim: Simulation, trigger, trial: Stage, factor: float, judge=None
     result = capped if capped is not None else run_stage(sim, _trial_stage_at(trial, factor), frames=False,
                                                          journal=journal)
     stable = bool(judge(sim, result)) if judge is not None else result.reason == "converged"
-    followed = None
+    followed = verdict = None
     if follow is not None and result.reason == "capped" and not getattr(sim, "time_capped", False):
         fail_d = failure_displacement(sim, trial.fail)
         if on_follow is not None:
             on_follow(result)
-        followed = run_stage(sim, _follow_stage_at(follow, trial, factor, fail_d - result.max_displacement),
-                             frames=False, journal=journal)
-        stable = creep_verdict(result.reason, result.max_displacement, followed.reason, followed.max_displacement,
-                               fail_d) == "crept"
+        # the capped stage ended within the failure displacement (checked at its last step)
+        remaining = max(fail_d - result.max_displacement, 1e-9 * fail_d)
+        followed = run_stage(sim, _follow_stage_at(follow, trial, factor, remaining), frames=False, journal=journal)
+        verdict = creep_verdict(result.reason, result.max_displacement, followed.reason, followed.max_displacement,
+                                fail_d)
+        stable = verdict == "crept"
     info = None
     cracks = sim.cracks
     if not stable and cracks is not None:
         info = dict(factor=factor, surface=cracks.inelastic(), broken=np.flatnonzero(cracks.broken),
                     positions=sim.state.x.copy(), mode=cracks.failure_mode.copy())
     return Trial(factor, stable, result, time_capped=bool(getattr(sim, "time_capped", False)),
-                 rows=[dict(r) for r in sim.history[first_row:]], follow=followed), info
+                 rows=[dict(r) for r in sim.history[first_row:]], follow=followed, follow_verdict=verdict), info
 
 
 _WORKER: dict = {}
@@ -474,6 +483,9 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if follow is not None and judge is not None:
         raise ValueError("factor_of_safety: follow judges a capped trial by whether it comes to rest; a judged "
                          "trial has its own verdict: give one or the other")
+    if follow is not None and failure_displacement(sim, (trial or default_trial_stage(sim)).fail) is None:
+        raise ValueError("factor_of_safety: follow judges a capped trial by the failure displacement, and the trial "
+                         "stage's fail rule gives none (a speed alone, or no rule): give it a displacement")
     if trial.converge is None and judge is None:
         raise ValueError("factor_of_safety: the trial stage needs a converge rule (stability is convergence) "
                          "or a judge of its end state")
@@ -492,8 +504,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         search["ratio"] = rule.unbalanced_ratio                          # another search; the default keeps
     if rule is not None and rule.hold_for:                              # the keys of checkpoints written before
         search["hold_for"] = rule.hold_for
-    if follow is not None:
-        search["follow"] = follow.name
+    if follow is not None:  # the follow's rules judge the trials too: a resume must keep them
+        search["follow"] = {"name": follow.name, "max_time": follow.max_time, "dt_fraction": follow.dt_fraction,
+                            "step_from": follow.step_from,
+                            "converge": None if follow.converge is None else dataclasses.asdict(follow.converge)}
     progress = None
     cut = None   # (factor, runtime, state) of a trial the checkpoint holds in progress
     start_file = None if journal is None or journal.path is None or workers > 1 else journal.path.with_name(START_NAME)
@@ -580,11 +594,12 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
         followed = d.get("follow")
         t = Trial(factor=factor, stable=bool(d["stable"]), time_capped=bool(d["time_capped"]),
                   result=StageResult(**{k: v for k, v in d.items() if k in keep}), rows=list(d.get("rows", [])),
-                  follow=None if followed is None else StageResult(**{k: v for k, v in followed.items() if k in keep}))
+                  follow=None if followed is None else StageResult(**{k: v for k, v in followed.items() if k in keep}),
+                  follow_verdict=d.get("follow_verdict"))
         sim.write_history_rows(t.rows)  # history.csv as the search never cut wrote it
         ff = progress["first_fail"]
         info = dict(ff) if ff is not None and not t.stable and float(ff["factor"]) == factor else None
-        replayed_wall += t.result.wall_seconds
+        replayed_wall += t.result.wall_seconds + (t.follow.wall_seconds if t.follow is not None else 0.0)
         return record((t, info), from_journal=True)
 
     if workers > 1:
@@ -734,7 +749,8 @@ def trial_curves(result: FoSResult) -> list[dict]:
     by parallel workers) or histories without the ratio column are left out."""
     curves = []
     for t in result.trials:
-        rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
+        rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r
+                and r.get("stage", t.result.name) == t.result.name]   # the trial's, not its follow's
         if rows:
             curve = trial_curve(t.factor, t.stable, [float(r["time"]) for r in rows],
                                 [float(r["unbalanced_ratio"]) for r in rows],
@@ -834,8 +850,10 @@ def bracket_by_cap(trials: list[dict], window: float, cap: float) -> list[dict]:
     judged = [t for t in trials if not t.get("time_capped")]
     readings = []
     for c in reversed(caps):
+        # at the trials' own cap their own verdicts (a trial that converged on its last step may
+        # end a step past the cap)
         stable = sorted(float(t["factor"]) for t in judged
-                        if t["stable"] and t["t_end"] - t["t_start"] <= c * (1.0 + 1e-9))
+                        if t["stable"] and (c == caps[0] or t["t_end"] - t["t_start"] <= c * (1.0 + 1e-9)))
         failing = sorted(float(t["factor"]) for t in judged if float(t["factor"]) not in stable)
         lo = stable[-1] if stable else None
         hi = failing[0] if failing else None

@@ -190,6 +190,9 @@ class SlopeWorkflow:
                              f"{self.runout_dt_fraction!r}")
         if self.trial_end not in TRIAL_ENDS:
             raise ValueError(f"SlopeWorkflow.trial_end must be one of {', '.join(TRIAL_ENDS)}, got {self.trial_end!r}")
+        if self.trial_end == "rest" and self.fos is None:
+            raise ValueError("SlopeWorkflow.trial_end = 'rest' judges the trials of the factor-of-safety search, and "
+                             "there is none (fos = None): give fos = (lower, upper, tol), or leave trial_end 'cap'")
         if self.trial_end == "rest" and self.trigger != "strength":
             raise ValueError("SlopeWorkflow.trial_end = 'rest' follows the trials of a strength-reduction search; "
                              "the gravity search's trials end at their cap: leave it 'cap'")
@@ -456,10 +459,14 @@ def _tell_searched(summary: dict) -> None:
                               f"the cap (longer trials, step_time, tell)")
     followed = [t for t in fos.get("trials", []) if t.get("follow")]
     if followed:
-        stood = [t["factor"] for t in followed if t["stable"]]
-        summary["ending"] += (f"; {len(followed)} trial(s) reached their cap and were followed undamped to rest, "
-                              + (f"standing at F = {', '.join(f'{f:.4g}' for f in sorted(stood))} after creeping"
-                                 if stood else "none coming to rest short of the failure displacement"))
+        stood = sorted(t["factor"] for t in followed if t["follow_verdict"] == "crept")
+        open_ = sorted(t["factor"] for t in followed if t["follow_verdict"] == "undecided")
+        summary["ending"] += (f"; {len(followed)} trial(s) reached their cap and were followed undamped"
+                              + (f", standing at F = {', '.join(f'{f:.4g}' for f in stood)} after creeping" if stood else "")
+                              + (f", the follow capped short of the failure displacement at F = "
+                                 f"{', '.join(f'{f:.4g}' for f in open_)} (counted failing: a longer runout cap, "
+                                 f"--runout-time, tells)" if open_ else "")
+                              + ("" if stood or open_ else ", each reaching the failure displacement"))
     by_cap = fos.get("by_cap") or []
     if len(by_cap) > 1 and by_cap[-2]["bracket"] != by_cap[-1]["bracket"]:
         summary["ending"] += (f"; read at half the trials' length ({by_cap[-2]['cap_response_times']:.3g} "

@@ -217,6 +217,7 @@ def test_the_snap_back_error_says_how_much_finer_to_mesh():
     ("fos", (2.0, 1.0, 0.1)), ("fos", (1.0, 2.0, 0.0)), ("fos", (1.0, 2.0, -0.1)), ("fos", (1.0, 2.0, 1e-20)),
     ("fos", (1.0, 2.0)), ("factors", ()), ("factors", (1.5, 1.2)), ("final_strength", 1.5),
     ("equilibrium_ratio", 2.0), ("rest_kinetic_ratio", 0.0), ("reduction_rate", -5.0), ("runout_dt_fraction", 1.5),
+    ("trial_end", "forever"), ("trial_end", "rest"),   # "rest" with no search to judge (fos = None)
 ])
 def test_the_slope_workflow_names_the_bad_field(field, value):
     with pytest.raises(ValueError, match=f"SlopeWorkflow.{field}"):

@@ -381,11 +381,12 @@ def test_trials_followed_to_rest_give_the_bracket_of_trials_long_enough_to_conve
     assert capped.bracket[1] == rest.bracket[0] and abs(rest.fos - le) < 0.01 * le
     crept = next(t for t in rest.trials if t.factor == rest.bracket[0])
     assert crept.stable and crept.result.reason == "capped" and crept.follow.reason == "converged"
+    assert crept.follow_verdict == "crept"
     assert crept.result.max_displacement + crept.follow.max_displacement < 0.01 * 0.01 * H   # under a millimetre
     for t in rest.trials:
         if not t.stable:   # each slid to the failure displacement (1 % of the height), followed or not
             assert t.follow.reason == "failed" and t.result.max_displacement + t.follow.max_displacement >= 0.01 * H
-    assert not rest.leans_on_cap and rest.by_cap == [] and rest.as_dict()["trials"][1]["follow"]["reason"] == "failed"
+    assert not rest.leans_on_cap and rest.by_cap == [] and rest.as_dict()["trials"][1]["follow_verdict"] == "failed"
     assert "followed undamped, came to rest" in capsys.readouterr().out
     sim.close()
     # the workflow's search alone so judged says which trials crept and stood
