@@ -25,7 +25,7 @@ import numpy as np
 
 from fdem.io.history import read_history
 from fdem.io.pictures import trial_histories_plot
-from fdem.workflow.fos import settling_at_cap, trial_curve
+from fdem.workflow.fos import FOLLOW_SUFFIX, settling_at_cap, trial_curve
 
 
 def option(argv: list[str], flag: str, default: float) -> float:
@@ -45,12 +45,14 @@ def curves_of(run: Path) -> tuple[list[dict], float, str]:
             limit = max(limit, float(raised.group(1)))
     curves = []
     for t in fos["trials"]:
-        rows = stage == t["name"]
+        # the trial's rows, and its follow's when it was followed to rest
+        rows = (stage == t["name"]) | (stage == t["name"] + FOLLOW_SUFFIX) if t.get("follow") else stage == t["name"]
         if rows.any():  # the same curve a search draws of its own trials
             curve = trial_curve(t["factor"], t["stable"], history["time"][rows],
                                 history["unbalanced_ratio"][rows], history["max_displacement"][rows])
-            trend = t.get("cap_trend")
-            if trend is None and t["reason"] == "capped" and "--step-time" not in argv:
+            curve["follow_from"] = t["t_end"] - float(history["time"][rows][0]) if t.get("follow") else None
+            trend = t.get("cap_trend") if not t.get("follow") else None
+            if trend is None and not t.get("follow") and t["reason"] == "capped" and "--step-time" not in argv:
                 trend = settling_at_cap(history["time"][rows], history["max_displacement"][rows],
                                         history["unbalanced_ratio"][rows], window=(t["t_end"] - t["t_start"]) / 5.0)
             curve["settling"] = bool(trend and trend["settling"])

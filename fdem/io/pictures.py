@@ -724,7 +724,8 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
     ``ratio`` and ``displacement`` [m] of equal length; optionally ``limit``, the trial's own limit
     (drawn dotted in its colour) where the trials' limits differ, and ``settling``: a trial that
     reached its cap still settling (:func:`fdem.workflow.fos.settling_at_cap`), drawn dashed and
-    labelled so, whose verdict leans on the cap."""
+    labelled so, whose verdict leans on the cap; ``follow_from`` [s]: a trial followed undamped
+    from its cap (:func:`fdem.workflow.fos.factor_of_safety` ``follow``), the follow drawn dash-dotted."""
     from matplotlib import colormaps
 
     fig = new_figure((8.0, 6.0))
@@ -737,13 +738,18 @@ def trial_histories_plot(path: str | os.PathLike | None, trials: list[dict], lim
             _same_length(time=time, ratio=ratio, displacement=disp)
             colour = shades[stable](0.45 + 0.5 * (k + 1) / len(group))
             settling = bool(t.get("settling"))
+            follow_from = t.get("follow_from")
             label = f"{trigger} = {t['factor']:.4g} {'stable' if stable else 'failing'}" + (
-                " (capped, settling)" if settling else "")
+                " (capped, settling)" if settling else "") + (" (followed from its cap)" if follow_from is not None else "")
             style = "--" if settling else "-"
-            top.plot(time, ratio, color=colour, lw=1.1, ls=style, label=label)
+            cut = time.size if follow_from is None else int(np.searchsorted(time, follow_from, side="right"))
+            top.plot(time[:cut], ratio[:cut], color=colour, lw=1.1, ls=style, label=label)
+            bottom.plot(time[:cut], disp[:cut], color=colour, lw=1.1, ls=style)
+            if cut < time.size:   # the undamped follow, from the trial's last row on
+                top.plot(time[max(cut - 1, 0):], ratio[max(cut - 1, 0):], color=colour, lw=1.1, ls="-.")
+                bottom.plot(time[max(cut - 1, 0):], disp[max(cut - 1, 0):], color=colour, lw=1.1, ls="-.")
             if t.get("limit") is not None:   # a trial's own limit, where the trials' differ
                 top.axhline(t["limit"], color=colour, ls=":", lw=0.8)
-            bottom.plot(time, disp, color=colour, lw=1.1, ls=style)
     if limit is not None:
         top.axhline(limit, color="k", ls="--", lw=0.9,
                     label=f"limit {limit:.3g}" + (f", held {hold:.3g} s" if hold else ""))

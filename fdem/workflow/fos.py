@@ -745,17 +745,19 @@ def trial_curves(result: FoSResult) -> list[dict]:
     """Each trial's history (its ``rows``) as the curves of
     :func:`fdem.io.pictures.trial_histories_plot`: time since the trial's first row [s], the
     unbalanced-force ratio, the growth of the largest displacement since that row [m], and the
-    ratio limit the trial's rule applied (``StageResult.ratio_limit``). Trials without rows (run
+    ratio limit the trial's rule applied (``StageResult.ratio_limit``); a trial followed to rest
+    goes on into its follow, from ``follow_from`` [s]. Trials without rows (run
     by parallel workers) or histories without the ratio column are left out."""
     curves = []
     for t in result.trials:
-        rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r
-                and r.get("stage", t.result.name) == t.result.name]   # the trial's, not its follow's
+        rows = [r for r in t.rows if "unbalanced_ratio" in r and "max_displacement" in r]
         if rows:
             curve = trial_curve(t.factor, t.stable, [float(r["time"]) for r in rows],
                                 [float(r["unbalanced_ratio"]) for r in rows],
                                 [float(r["max_displacement"]) for r in rows], t.result.ratio_limit)
-            curve["settling"] = bool(t.cap_trend and t.cap_trend["settling"])
+            # a followed trial was judged by its follow, drawn on from the cap; not by its cap
+            curve["settling"] = bool(t.follow is None and t.cap_trend and t.cap_trend["settling"])
+            curve["follow_from"] = None if t.follow is None else float(t.result.t_end - float(rows[0]["time"]))
             curves.append(curve)
     return curves
 

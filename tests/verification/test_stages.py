@@ -382,6 +382,11 @@ def test_trials_followed_to_rest_give_the_bracket_of_trials_long_enough_to_conve
     crept = next(t for t in rest.trials if t.factor == rest.bracket[0])
     assert crept.stable and crept.result.reason == "capped" and crept.follow.reason == "converged"
     assert crept.follow_verdict == "crept"
+    from fdem.workflow.fos import trial_curves
+
+    curve = next(c for c in trial_curves(rest) if c["factor"] == crept.factor)   # drawn on into its follow
+    assert curve["follow_from"] == pytest.approx(2 * T, rel=0.05) and curve["time"][-1] > curve["follow_from"]
+    assert not curve["settling"]   # judged by its follow, not by its cap
     assert crept.result.max_displacement + crept.follow.max_displacement < 0.01 * 0.01 * H   # under a millimetre
     for t in rest.trials:
         if not t.stable:   # each slid to the failure displacement (1 % of the height), followed or not
