@@ -323,9 +323,11 @@ def test_a_bracket_its_ends_contradict_is_a_result_not_a_crash(monkeypatch, redu
     from fdem.workflow import slope
     from fdem.workflow.fos import BracketError, Trial
 
-    def fake_search(sim, lower, upper, tol, out_dir=None, journal=None, trial=None):
-        # the search judges its trials by the workflow's rule: its stage cap and failure displacement
+    def fake_search(sim, lower, upper, tol, out_dir=None, journal=None, trial=None, follow=None):
+        # the search judges its trials by the workflow's rule: its stage cap and failure displacement,
+        # a capped trial failing (trial_end "cap", the default: no follow)
         assert (trial.max_time, trial.fail.displacement, trial.converge.unbalanced_ratio) == (5.0, 0.3, 1e-4)
+        assert follow is None
         trial = Trial(factor=upper if stable_at_upper else lower, stable=stable_at_upper,
                       result=stage("trial", "converged" if stable_at_upper else "capped", 1e-3, 0.0))
         raise BracketError("factor_of_safety: the slope is still stable at the upper factor F = 2; raise the bracket"
@@ -373,7 +375,7 @@ def test_a_search_alone_runs_no_runout_and_a_capped_trial_gives_no_verdict(monke
 
     capped = Trial(factor=1.0, stable=False, result=stage("trial", "capped", 1e-3, 0.0), time_capped=True)
 
-    def cut_by_the_cap(sim, lower, upper, tol, out_dir=None, journal=None, trial=None):
+    def cut_by_the_cap(sim, lower, upper, tol, out_dir=None, journal=None, trial=None, follow=None):
         raise BracketError("factor_of_safety: the slope already fails at the lower factor F = 1", capped)
 
     for reduction in ("none", "steps"):
