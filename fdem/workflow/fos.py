@@ -328,6 +328,12 @@ class _TrialJournal:
         self.journal.current = None
 
 
+def _stage_result(d: dict) -> StageResult:
+    """A :class:`StageResult` from its journal record (a trial's record holds other keys too)."""
+    keep = {f.name for f in dataclasses.fields(StageResult)}
+    return StageResult(**{k: v for k, v in d.items() if k in keep})
+
+
 def creep_verdict(stage_reason: str, stage_displacement: float, follow_reason: str, follow_displacement: float,
                   fail_displacement: float) -> str:
     """What a damped stage that did not settle within its cap, followed undamped, says of the
@@ -483,7 +489,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     if follow is not None and judge is not None:
         raise ValueError("factor_of_safety: follow judges a capped trial by whether it comes to rest; a judged "
                          "trial has its own verdict: give one or the other")
-    if follow is not None and failure_displacement(sim, (trial or default_trial_stage(sim)).fail) is None:
+    if follow is not None and failure_displacement(sim, trial.fail) is None:
         raise ValueError("factor_of_safety: follow judges a capped trial by the failure displacement, and the trial "
                          "stage's fail rule gives none (a speed alone, or no rule): give it a displacement")
     if trial.converge is None and judge is None:
@@ -509,7 +515,7 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                             "step_from": follow.step_from,
                             "converge": None if follow.converge is None else dataclasses.asdict(follow.converge)}
     progress = None
-    cut = None   # (factor, runtime, state) of a trial the checkpoint holds in progress
+    cut = None   # (factor, runtime, state, capped result if inside its follow) of a trial the checkpoint holds
     start_file = None if journal is None or journal.path is None or workers > 1 else journal.path.with_name(START_NAME)
     if journal is not None:
         progress = journal.marks.get(TRIALS_MARK)
@@ -539,10 +545,8 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
                              f"start the run again")
         if in_trial:  # the state loaded is the trial's, to go on with once the finished trials are replayed
             journal.resume = None
-            keep = {f.name for f in dataclasses.fields(StageResult)}
-            capped_result = StageResult(**{k: v for k, v in progress["running_capped"].items() if k in keep}) \
-                if in_follow else None
-            cut = (float(running), runtime, snapshot(sim), capped_result)
+            cut = (float(running), runtime, snapshot(sim),
+                   _stage_result(progress["running_capped"]) if in_follow else None)
         if not fresh and start_file is not None and start_file.is_file():
             # a resumed search starts from the state kept apart when it began, whatever state the
             # checkpoint holds (a trial's, or one written by a stop before the trial went on)
@@ -590,12 +594,10 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
     def replay(factor: float) -> bool:
         nonlocal replayed_wall
         d = replayed[factor]
-        keep = {f.name for f in dataclasses.fields(StageResult)}
         followed = d.get("follow")
         t = Trial(factor=factor, stable=bool(d["stable"]), time_capped=bool(d["time_capped"]),
-                  result=StageResult(**{k: v for k, v in d.items() if k in keep}), rows=list(d.get("rows", [])),
-                  follow=None if followed is None else StageResult(**{k: v for k, v in followed.items() if k in keep}),
-                  follow_verdict=d.get("follow_verdict"))
+                  result=_stage_result(d), rows=list(d.get("rows", [])),
+                  follow=None if followed is None else _stage_result(followed), follow_verdict=d.get("follow_verdict"))
         sim.write_history_rows(t.rows)  # history.csv as the search never cut wrote it
         ff = progress["first_fail"]
         info = dict(ff) if ff is not None and not t.stable and float(ff["factor"]) == factor else None
