@@ -479,26 +479,28 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
     """:func:`report_cost` for the slope workflow's runout stage at its cap and its own step
     (the longest stage by far: the quasi-static stages run density-scaled at a larger step); for
     a run whose analysis is the factor-of-safety search (``reduction = "none"``), the equilibrium
-    at F = 1 (capped at twice the workflow's ``step_time``, default 10 response times) and the
+    at F = 1 (capped at :attr:`fdem.workflow.slope.StageRules.equilibrium_time`, 10 response
+    times unless the trials are longer) and the
     search at its most (:func:`fdem.workflow.fos.most_trials` trials, each capped at ``step_time``,
     default 5 response times)."""
     import numpy as np
 
-    from fdem.workflow.slope import runout_stage
+    from fdem.workflow.slope import runout_stage, stage_rules
     from fdem.workflow.stages import response_time
 
     height = float(np.ptp(sim.model.topology.x0[:, 1]))
     g = float(np.linalg.norm(sim.gravity)) or 9.81
     runout_cap = runout_stage(workflow, response_time(sim.model), height, g).max_time
     if workflow.reduction == "none":
-        from fdem.workflow.fos import DEFAULT_CAP_RESPONSE_TIMES, most_trials
+        from fdem.workflow.fos import most_trials
 
         trials = most_trials(*workflow.fos)
-        cap = workflow.step_time or DEFAULT_CAP_RESPONSE_TIMES * response_time(sim.model)
+        rules = stage_rules(sim, workflow)
+        cap, equilibrium = rules.step_time, rules.equilibrium_time
         # a trial followed to rest goes on, undamped, for at most the runout's cap
         follow = runout_cap if workflow.trial_end == "rest" else 0.0
-        return report_cost(parser, sim, args, 2.0 * cap + trials * (cap + follow),
-                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {2.0 * cap:.3g} s "
+        return report_cost(parser, sim, args, equilibrium + trials * (cap + follow),
+                           f"the equilibrium at F = 1 and the factor-of-safety search, at most {equilibrium:.3g} s "
                            f"and {trials} trials of up to {cap:.3g} s simulated"
                            + (f", each followed to rest for up to {follow:.3g} s more" if follow else ""))
     cap = runout_cap

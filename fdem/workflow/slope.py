@@ -86,11 +86,14 @@ class SlopeWorkflow:
         at F = 1.1125 that is still creeping 15 T later (``docs/cases.md`` A)
     step_time : cap of each damped stage, the factor-of-safety trials included (default ``5 T``: with
         the fundamental-mode damping a stable slope converges within about 1.5 T). The
-        equilibrium stage at ``F = 1`` gets twice that: it is where the elastic start's
-        over-strength joints slip into place, and a slope that cannot stand at ``F = 1`` ends
-        the analysis. The high-angle fine four-slope scene at 1.0 m needs it: joints slipping
-        beside its right-hand boundary break 23 elements, and its ratio falls from 0.05 at
-        0.6 s to 1.15e-4 at the 5 T cap (2.06 s), still falling about 2.5x per 0.2 s
+        equilibrium stage at ``F = 1`` gets twice that, and never less than twice the default
+        (:attr:`StageRules.equilibrium_time`): it is where the elastic start's over-strength
+        joints slip into place, and a slope that cannot stand at ``F = 1`` ends the analysis, so
+        shorter trials must not shorten it. The high-angle fine four-slope scene at 1.0 m needs
+        it: joints slipping beside its right-hand boundary break 23 elements, and its ratio falls
+        from 0.05 at 0.6 s to 1.15e-4 at the 5 T cap (2.06 s), still falling about 2.5x per
+        0.2 s; the high-angle coarse one at 2.0 m converges at 5.3 T, so trials of 2.5 T with an
+        equilibrium of twice theirs "failed" at F = 1 with the slope at 8e-5 m/s
     fail_displacement : displacement since a stage began that counts as failure [m], in every
         damped stage and trial (default 1 % of the model height)
     runout_time : cap of the runout stage (default ``max(20 T, 4 sqrt(2 H / g))``, four times
@@ -270,6 +273,12 @@ class StageRules(NamedTuple):
     damped: Damping
     converge: Convergence
 
+    @property
+    def equilibrium_time(self) -> float:
+        """Cap of the equilibrium stage at ``F = 1`` [s]: ``2 max(step_time, 5 T)``, twice the
+        trials' cap and never under twice the default's (:attr:`SlopeWorkflow.step_time`)."""
+        return 2.0 * max(self.step_time, DEFAULT_CAP_RESPONSE_TIMES * self.T)
+
 
 def stage_rules(sim: Simulation, wf: SlopeWorkflow) -> StageRules:
     """The :class:`StageRules` of ``wf`` on ``sim``; a hold that does not fit in the stage cap is
@@ -360,7 +369,7 @@ def _run_stages(sim, wf, summary, record, cracks, rules, out_dir, journal) -> No
     T, height, g, step_time, fail, damped = rules[:6]
     if journal is None or journal.resume is None and not journal.done:
         cracks.hold_elastic(False)
-    eq = record(run_stage(sim, Stage("equilibrium", max_time=2.0 * step_time, reduction=1.0,
+    eq = record(run_stage(sim, Stage("equilibrium", max_time=rules.equilibrium_time, reduction=1.0,
                                      damping=equilibrium_damping(sim),
                                      converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio), fail=fail),
                           journal=journal))

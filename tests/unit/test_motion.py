@@ -249,7 +249,7 @@ def test_a_slope_that_crept_and_stopped_is_told_from_one_that_failed(failing, ru
         assert "0.036 m" in summary["ending"] and "longer runout cap" in summary["ending"]
 
 
-def scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal=None) -> dict:
+def scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal=None, step_time=5.0) -> dict:
     """The workflow's reduction steps with ``fake_run_stage`` in place of the solver (its
     equilibrium undamped): the summary of :func:`fdem.workflow.slope._run_stages`."""
     import types
@@ -265,11 +265,32 @@ def scripted_workflow(monkeypatch, fake_run_stage, sim, wf, journal=None) -> dic
         summary["stages"].append(result.as_dict())
         return result
 
-    rules = slope.StageRules(T=1.0, height=10.0, g=9.81, step_time=5.0, fail=slope.Failure(displacement=0.3),
+    rules = slope.StageRules(T=1.0, height=10.0, g=9.81, step_time=step_time, fail=slope.Failure(displacement=0.3),
                              damped=slope.NO_DAMPING,
                              converge=slope.Convergence(unbalanced_ratio=wf.equilibrium_ratio, hold_for=wf.equilibrium_hold))
     slope._run_stages(sim, wf, summary, record, cracks, rules, None, journal)
     return summary
+
+
+@pytest.mark.parametrize("step_time, equilibrium_cap", [(2.0, 10.0), (5.0, 10.0), (8.0, 16.0)])
+def test_shorter_trials_do_not_shorten_the_equilibrium(monkeypatch, step_time, equilibrium_cap):
+    """The equilibrium at F = 1 is capped at twice the stage cap, and never under twice 5
+    response times (T = 1 s here): trials of 2.5 T on the high-angle coarse four-slope scene at
+    2.0 m capped its equilibrium at 5 T, which it needs 5.3 T to meet, and the run called a slope
+    moving at 8e-5 m/s failed at F = 1."""
+    import types
+
+    from fdem.workflow import slope
+
+    caps = {}
+
+    def fake_run_stage(sim, st, journal=None):
+        caps[st.name] = st.max_time
+        return stage(st.name, "converged", 1e-3, st.reduction if st.reduction is not None else 0.0)
+
+    scripted_workflow(monkeypatch, fake_run_stage, types.SimpleNamespace(time_capped=False),
+                      slope.SlopeWorkflow(factors=(1.25,)), step_time=step_time)
+    assert caps == {"equilibrium": equilibrium_cap, "reduction_F1.250": step_time}
 
 
 @pytest.mark.parametrize("script, outcome, bracket, names", [
