@@ -498,7 +498,7 @@ def report_runout_cost(parser: argparse.ArgumentParser, sim, args, workflow) -> 
         rules = stage_rules(sim, workflow)
         cap, equilibrium = rules.step_time, rules.equilibrium_time
         # a trial followed to rest goes on, undamped, for at most the runout's cap
-        follow = runout_cap if workflow.trial_end == "rest" else 0.0
+        follow = runout_cap if workflow.trial_rule == "rest" else 0.0
         return report_cost(parser, sim, args, equilibrium + trials * (cap + follow),
                            f"the equilibrium at F = 1 and the factor-of-safety search, at most {equilibrium:.3g} s "
                            f"and {trials} trials of up to {cap:.3g} s simulated"

@@ -297,7 +297,7 @@ def scene(angle: str = "low", spacing="fine", size: float = SIZE, refine: float 
               **({"equilibrium_ratio": workflow.equilibrium_ratio} if workflow.equilibrium_ratio != 1e-4 else {}),
               **({"equilibrium_hold": workflow.equilibrium_hold} if workflow.equilibrium_hold else {}),
               **({"step_time": workflow.step_time} if workflow.step_time else {}),
-              **({"trial_end": workflow.trial_end} if workflow.trial_end != "cap" else {}),
+              **({"trial_end": workflow.trial_end} if workflow.trial_end is not None else {}),
               **({"local_fall_area": workflow.local_fall_area} if workflow.local_fall_area else {})}
     if tensile is not None:
         wf["reduce_tensile"] = tensile == "reduced"
@@ -392,14 +392,14 @@ def main(argv=None) -> dict:
                              "factor creeps with its ratio dipping below a raised limit and rising again)")
     parser.add_argument("--step-time", type=float, default=None, metavar="SECONDS",
                         help="cap of every damped stage and factor-of-safety trial [s of simulated time] (default 5 "
-                             "response times, printed with the cost estimate); a trial that reaches its cap fails, "
-                             "and a search whose failing end was still settling there says so (fos.json "
-                             "leans_on_cap): longer trials tell whether it would have converged")
-    parser.add_argument("--trial-end", choices=["cap", "rest"], default="cap",
-                        help="what a factor-of-safety trial that reaches its cap (--step-time) says: 'cap' (default) "
-                             "it fails; 'rest' it is followed undamped, as the damped steps follow a stage that did "
-                             "not settle, and stands if it comes to rest having moved less than the failure "
-                             "displacement: the factor of a slope that creeps and stops, not of the cap")
+                             "response times, printed with the cost estimate); a trial that reaches its cap is "
+                             "followed to rest (--trial-end)")
+    parser.add_argument("--trial-end", choices=["cap", "rest"], default=None,
+                        help="what a factor-of-safety trial that reaches its cap (--step-time) says: 'rest' "
+                             "(default) it is followed undamped, as the damped steps follow a stage that did not "
+                             "settle, and stands if it comes to rest having moved less than the failure "
+                             "displacement: the factor of a slope that creeps and stops, not of the cap; 'cap' it "
+                             "fails, quicker and the same for a slope that slides")
     parser.add_argument("--runout-time", type=float, default=None, help="cap on the runout stage [s of simulated time]")
     parser.add_argument("--runout-dt-fraction", type=float, default=0.8, metavar="FACTOR",
                         help="time-step factor of the runout stage (default 0.8; 0.4 takes twice the steps "

@@ -204,9 +204,6 @@ def scene_ensemble(path: str | Path, n: int | None = None, seed: int | None = No
     from fdem.scene.objects import workflow
 
     search = workflow(scene)   # each realization's search is judged by the scene's trial rule
-    if search.trial_end != "cap":
-        raise SceneError(f"{path}: [workflow] trial_end = {search.trial_end!r}: an ensemble judges each realization's "
-                         f"trials at their cap; trials followed to rest are for a single run (fdem run) for now")
     runout = None
     if settings["runout"]:
         runout = search

@@ -185,9 +185,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rest_kinetic_ratio": _f("kinetic energy over its peak that counts as rest [-]", 0.01, low=0.0, high=1.0,
                                  open_low=True, open_high=True),
         "runout_dt_fraction": _f("time-step factor of the runout [-]", 0.8, **FRACTION),
-        "trial_end": Key("str", "what a factor-of-safety trial that reaches its cap says: 'cap' it fails, 'rest' it "
-                                "is followed undamped and stands if it comes to rest having moved less than the "
-                                "failure displacement (the damped steps' rule)", default="cap", choices=("cap", "rest")),
+        "trial_end": Key("str", "what a factor-of-safety trial that reaches its cap says: 'rest' it is followed "
+                                "undamped and stands if it comes to rest having moved less than the failure "
+                                "displacement (the damped steps' rule), 'cap' it fails; unset: 'rest' for a "
+                                "strength search, 'cap' for a gravity one", choices=("cap", "rest")),
         "runout_step": Key("str", "what the runout's time-step factor multiplies: the solver's bound on the critical "
                                   "step, or the critical step measured on the model when the runout starts and again every "
                                   "response time (1.26-1.63 times the bound on the four slopes; CPU only)", default="bound",

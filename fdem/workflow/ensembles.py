@@ -221,13 +221,15 @@ class Ensemble:
     toe_x : toe abscissa [m] for :func:`fdem.results.analysis.runout` (default: the scene's ``toe_x``)
     pictures : return the failure picture of each realization (``fos_failure.png``)
     max_time : cap [s] on each trial's simulated time, or ``None`` (the trial's own cap, 5 T).
-        A smoke setting: a capped trial counts as failing, so realizations end
+        A smoke setting (a followed trial's follow is capped there too): a capped trial counts as failing, so realizations end
         ``below_bracket``; the cap is part of the description, so it never mixes with real runs
     search : a :class:`fdem.workflow.slope.SlopeWorkflow` whose trial rule judges the search's
         trials (its ``equilibrium_ratio``, ``equilibrium_hold``, ``step_time`` and
-        ``fail_displacement``, :func:`fdem.workflow.slope.trial_stage`), as ``fdem run`` judges
-        the scene's own search; ``None``: the default trial
-        (:func:`fdem.workflow.fos.default_trial_stage`)
+        ``fail_displacement``, :func:`fdem.workflow.slope.trial_stage`, and what a capped trial
+        says, :attr:`~fdem.workflow.slope.SlopeWorkflow.trial_rule`), as ``fdem run`` judges the
+        scene's own search; ``None``: the default trial
+        (:func:`fdem.workflow.fos.default_trial_stage`), followed to rest when capped as a default
+        workflow's is
     """
 
     scene: Callable
@@ -279,7 +281,18 @@ class Ensemble:
                 **({"max_time": float(self.max_time)} if self.max_time is not None else {}),
                 # only when not the default trial's, so that the fingerprints of ensembles judged by
                 # it stay as they were before the rule was kept
-                **({"search": _search_rule(self.search)} if _search_rule(self.search) != _search_rule() else {})}
+                **({"search": _search_rule(self.search)} if _search_rule(self.search) != _search_rule() else {}),
+                # only when followed, so that ensembles judged at the cap keep their fingerprints
+                # and those judged at rest never mix with them
+                **({"trial_end": "rest"} if self.trial_rule == "rest" else {})}
+
+    @property
+    def trial_rule(self) -> str:
+        """What a realization's capped trial says: the search's
+        :attr:`~fdem.workflow.slope.SlopeWorkflow.trial_rule`, a default workflow's without one."""
+        from fdem.workflow.slope import SlopeWorkflow
+
+        return (self.search or SlopeWorkflow()).trial_rule
 
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`describe` (canonical JSON)."""
@@ -360,15 +373,19 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         lower, upper, tol = ensemble.fos
         try:
             with tempfile.TemporaryDirectory() as tmp:
+                from fdem.workflow.slope import SlopeWorkflow, stage_rules, trial_follow, trial_stage
+
                 trial = None
                 if ensemble.search is not None:  # the scene's own trial rule, as its fdem run judges it
-                    from fdem.workflow.slope import trial_stage
-
                     trial = trial_stage(sim, ensemble.search)
-                if ensemble.max_time is not None:
+                rule = ensemble.search or SlopeWorkflow()
+                follow = trial_follow(rule, stage_rules(sim, rule))
+                if ensemble.max_time is not None:  # the smoke cap holds a follow too
                     trial = trial or default_trial_stage(sim)
                     trial = dataclasses.replace(trial, max_time=min(trial.max_time, ensemble.max_time))
-                res = factor_of_safety(sim, lower, upper, tol=tol, trial=trial,
+                    if follow is not None:
+                        follow = dataclasses.replace(follow, max_time=min(follow.max_time, ensemble.max_time))
+                res = factor_of_safety(sim, lower, upper, tol=tol, trial=trial, follow=follow,
                                        out_dir=tmp if ensemble.pictures else None)
                 png = Path(tmp) / "fos_failure.png"
                 if png.exists():

@@ -885,7 +885,8 @@ def _tell_by_cap(result: FoSResult) -> None:
         + "; ".join(f"{r['cap_response_times']:.3g} T {bracket_words(r['bracket'])}"
                     + ("" if r["ordered"] else " (not ordered: a stable factor above a failing one)")
                     for r in result.by_cap)
-        + ": the factor moved with the cap, and may move further with longer trials")
+        + ": the factor moved with the cap, and may move further with longer trials; trials followed to rest "
+          "(the slope workflow's trial_end 'rest', its default) give the slope's")
 
 
 def _cap_trend(sim: Simulation, t: Trial) -> dict | None:
@@ -911,8 +912,9 @@ def _tell_leaning_on_cap(sim: Simulation, result: FoSResult) -> None:
          f"{r.t_end - r.t_start:.4g} s ({(r.t_end - r.t_start) / T:.3g} response times) still settling: its largest "
          f"displacement grew {trend['share']:.2f} times as much in the last response time as in the one before, "
          f"and its unbalanced ratio fell {trend['ratio_fall']:.2f}-fold (to {trend['ratio_last']:.3g}); the factor "
-         f"may lean on the cap: a search with longer trials (SlopeWorkflow and scene key step_time, "
-         f"fdem run four-slopes --step-time SECONDS) tells whether it would have converged")
+         f"may lean on the cap, and longer trials may move it: trials followed to rest (SlopeWorkflow and "
+         f"scene key trial_end 'rest', the default; fdem run four-slopes --trial-end rest) tell whether the slope "
+         f"stands there")
 
 
 def _trials_picture(path: Path, sim: Simulation, result: FoSResult, trial: Stage) -> Path | None:

@@ -118,14 +118,18 @@ class SlopeWorkflow:
         its energy at 0.8 (1.5 % with 4 elements across the body, against 0.25 % at 0.4): pass 0.4
         where impact energies themselves are the answer.
     trial_end : what a factor-of-safety trial that reaches its cap (``step_time``) says:
-        ``"cap"`` (default) it fails, as in shear-strength-reduction practice; ``"rest"`` it is
-        followed undamped in the runout stage and stands when it comes to rest having moved less
-        than ``fail_displacement`` in all, fails otherwise: the rule the damped reduction steps
-        apply to a stage that did not settle (:func:`fdem.workflow.fos.creep_verdict`), so that
-        the search and the steps judge a slope alike. The high-angle four slopes creep for 10
-        response times and more at factors where they then stand: with ``"cap"`` their factor
-        is the cap's (``docs/cases.md`` A, "The high-angle coarse factor against the trial's
-        cap"). Strength searches only
+        ``"rest"`` it is followed undamped in the runout stage and stands when it comes to rest
+        having moved less than ``fail_displacement`` in all, fails otherwise: the rule the damped
+        reduction steps apply to a stage that did not settle
+        (:func:`fdem.workflow.fos.creep_verdict`), so that the search and the steps judge a slope
+        alike; ``"cap"`` it fails, as in shear-strength-reduction practice: quicker (no follow),
+        and the same factor for a slope that slides, but the cap's factor for one that creeps
+        and stops. ``None`` (default): ``"rest"`` for a strength search, ``"cap"`` for the
+        gravity one, whose trials are not followed (:attr:`trial_rule`). The high-angle coarse
+        four-slope scene at 1.0 m creeps for 20 response times and more at factors where it then
+        stands: capped trials of 5, 10 and 20 T give 1.516, 2.112 and 2.416, followed ones
+        2.5-2.95 (``docs/cases.md`` A, "The high-angle coarse factor against the trial's cap");
+        the low-angle coarse one, which slides, 1.084 either way
     runout_step : what ``runout_dt_fraction`` multiplies: ``"bound"`` (default) the solver's
         combined bound on the critical step, or ``"measured"`` the critical step measured on the
         model when the runout starts (:attr:`fdem.workflow.stages.Stage.step_from`), 1.26-1.63
@@ -149,7 +153,7 @@ class SlopeWorkflow:
     trigger: str = "strength"
     local_fall_area: float | None = None
     runout_step: str = "bound"
-    trial_end: str = "cap"
+    trial_end: str | None = None
 
     def __post_init__(self):
         """Every field checked, the message naming it: a negative time or displacement, an
@@ -191,14 +195,15 @@ class SlopeWorkflow:
                                                         and 0.0 < self.runout_dt_fraction <= 1.0):
             raise ValueError(f"SlopeWorkflow.runout_dt_fraction (time-step factor) must lie in (0, 1], got "
                              f"{self.runout_dt_fraction!r}")
-        if self.trial_end not in TRIAL_ENDS:
-            raise ValueError(f"SlopeWorkflow.trial_end must be one of {', '.join(TRIAL_ENDS)}, got {self.trial_end!r}")
+        if self.trial_end is not None and self.trial_end not in TRIAL_ENDS:
+            raise ValueError(f"SlopeWorkflow.trial_end must be one of {', '.join(TRIAL_ENDS)} or None (the "
+                             f"default: rest for a strength search), got {self.trial_end!r}")
         if self.trial_end == "rest" and self.fos is None:
             raise ValueError("SlopeWorkflow.trial_end = 'rest' judges the trials of the factor-of-safety search, and "
-                             "there is none (fos = None): give fos = (lower, upper, tol), or leave trial_end 'cap'")
+                             "there is none (fos = None): give fos = (lower, upper, tol), or leave trial_end unset")
         if self.trial_end == "rest" and self.trigger != "strength":
             raise ValueError("SlopeWorkflow.trial_end = 'rest' follows the trials of a strength-reduction search; "
-                             "the gravity search's trials end at their cap: leave it 'cap'")
+                             "the gravity search's trials end at their cap: leave trial_end unset or 'cap'")
         if self.runout_step not in STEP_FROM:
             raise ValueError(f"SlopeWorkflow.runout_step must be one of {', '.join(STEP_FROM)}, got {self.runout_step!r}")
         if self.fos is not None:
@@ -210,6 +215,14 @@ class SlopeWorkflow:
                 check_bracket(lower, upper, tol)
             except ValueError as err:
                 raise ValueError(f"SlopeWorkflow.fos = {self.fos!r}: {err}".replace("factor_of_safety: ", "")) from None
+
+    @property
+    def trial_rule(self) -> str:
+        """What the search's capped trials say under these settings: :attr:`trial_end` when
+        given, else ``"rest"`` for the strength trigger and ``"cap"`` for the gravity one."""
+        if self.trial_end is not None:
+            return self.trial_end
+        return "rest" if self.trigger == "strength" else "cap"
 
 
 def _real(value) -> bool:
@@ -293,6 +306,13 @@ def stage_rules(sim: Simulation, wf: SlopeWorkflow) -> StageRules:
     return StageRules(T=T, height=height, g=float(np.linalg.norm(sim.gravity)) or 9.81, step_time=step_time,
                       fail=Failure(displacement=wf.fail_displacement or 0.01 * height), damped=fundamental_damping(sim),
                       converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio, hold_for=hold))
+
+
+def trial_follow(wf: SlopeWorkflow, rules: StageRules) -> Stage | None:
+    """What follows a factor-of-safety trial that reaches its cap: under ``wf.trial_rule ==
+    "rest"`` the runout stage (:func:`runout_stage`: undamped, to rest or to the failure
+    displacement, :func:`fdem.workflow.fos.creep_verdict`), under ``"cap"`` nothing (``None``)."""
+    return runout_stage(wf, rules.T, rules.height, rules.g) if wf.trial_rule == "rest" else None
 
 
 def trial_stage(sim: Simulation, wf: SlopeWorkflow, rules: StageRules | None = None) -> Stage:
@@ -393,7 +413,7 @@ def _run_stages(sim, wf, summary, record, cracks, rules, out_dir, journal) -> No
             # and reported; the schedule after it does not depend on it and goes on.
             def search():
                 try:
-                    follow = runout_stage(wf, T, height, g) if wf.trial_end == "rest" else None
+                    follow = trial_follow(wf, rules)
                     return factor_of_safety(sim, lower=lower, upper=upper, tol=tol, out_dir=out_dir, journal=journal,
                                             trial=trial_stage(sim, wf, rules), follow=follow).as_dict()
                 except BracketError as err:
@@ -465,7 +485,7 @@ def _tell_searched(summary: dict) -> None:
                          f"{fos['n_trials']} trials): the search was the analysis (reduction 'none')")
     if fos.get("leans_on_cap"):
         summary["ending"] += (f"; F = {hi:.4g} reached the trial cap still settling: the factor may lean on "
-                              f"the cap (longer trials, step_time, tell)")
+                              f"the cap (trials followed to rest, trial_end 'rest', the default, tell whether it stands)")
     followed = [t for t in fos.get("trials", []) if t.get("follow")]
     if followed:
         stood = sorted(t["factor"] for t in followed if t["follow_verdict"] == "crept")
@@ -480,8 +500,8 @@ def _tell_searched(summary: dict) -> None:
     if len(by_cap) > 1 and by_cap[-2]["bracket"] != by_cap[-1]["bracket"]:
         summary["ending"] += (f"; read at half the trials' length ({by_cap[-2]['cap_response_times']:.3g} "
                               f"response times) the same trials bracket it at {bracket_words(by_cap[-2]['bracket'])}: "
-                              f"the factor moves with the trials' length (fos.json by_cap; longer trials, "
-                              f"step_time, tell how far)")
+                              f"the factor moves with the trials' length (fos.json by_cap; trials followed to "
+                              f"rest, trial_end 'rest', the default, give the slope's)")
 
 
 def beyond_bracket(err: BracketError, lower: float, upper: float) -> dict:

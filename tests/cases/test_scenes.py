@@ -499,10 +499,12 @@ def test_an_ensemble_varies_the_scene_keys_it_names(tmp_path):
              + ENSEMBLE.replace("[ensemble]\n", "[ensemble]\nrunout = true\n", 1))
     with pytest.raises(SceneError, match='reduction = "none" has none'):
         scene_ensemble(_write(tmp_path, alone, "alone.toml"))
-    # trials followed to rest are a single run's: an ensemble says so before any trial
-    rest = (SMALL_SLOPE + '[workflow]\nreduction = "none"\nfos = [0.5, 3.0, 0.2]\ntrial_end = "rest"\n' + ENSEMBLE)
-    with pytest.raises(SceneError, match="trial_end = 'rest'"):
-        scene_ensemble(_write(tmp_path, rest, "rest.toml"))
+    # a realization's capped trials are judged as the scene's fdem run judges them: followed to
+    # rest unless the scene says cap, and the rule is part of the description (never mixed)
+    capped = scene_ensemble(_write(tmp_path, weak + '[workflow]\ntrial_end = "cap"\n' + ENSEMBLE, "cap.toml"))
+    assert ens.trial_rule == "rest" and ens.describe()["trial_end"] == "rest"
+    assert capped.trial_rule == "cap" and "trial_end" not in capped.describe()
+    assert capped.fingerprint() != ens.fingerprint()
     low = realize(ens, 0, {"cracks_1_phi": 20.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
     high = realize(ens, 1, {"cracks_1_phi": 40.0, "joints_1_through_toe": 0.0, "heterogeneity_seed": 1})
     assert low["status"] == high["status"] == "ok", (low["error"], high["error"])

@@ -133,8 +133,8 @@ def test_peak_memory_follows_the_measured_peaks():
 def test_a_search_alone_is_priced_at_its_own_trial_cap(capsys):
     """``reduction = "none"``: the equilibrium at F = 1 (twice the stage cap, and never under
     twice 5 response times) and the search's most trials, each at the workflow's ``step_time``
-    when it gives one, 5 response times when not: the simulated seconds the estimate prices are
-    those the run may take."""
+    when it gives one, 5 response times when not, at the cap rule (no follow): the simulated
+    seconds the estimate prices are those the run may take."""
     import argparse
     from types import SimpleNamespace
 
@@ -148,7 +148,7 @@ def test_a_search_alone_is_priced_at_its_own_trial_cap(capsys):
     args = SimpleNamespace(yes=True, threads=1)
     assert 3.7 > 5.0 * T  # so that the longer trials lengthen the equilibrium too
     for step_time, cap, equilibrium in ((None, 5.0 * T, 10.0 * T), (3.7, 3.7, 7.4), (2.0 * T, 2.0 * T, 10.0 * T)):
-        wf = SlopeWorkflow(reduction="none", fos=(1.0, 1.6, 0.04), step_time=step_time)
+        wf = SlopeWorkflow(reduction="none", fos=(1.0, 1.6, 0.04), step_time=step_time, trial_end="cap")
         est = report_runout_cost(argparse.ArgumentParser(), sim, args, wf)
         n = most_trials(1.0, 1.6, 0.04)
         assert est["simulated_seconds"] == pytest.approx(equilibrium + n * cap, rel=1e-12), est

@@ -346,9 +346,11 @@ def test_a_bracket_its_ends_contradict_is_a_result_not_a_crash(monkeypatch, redu
 
     def fake_search(sim, lower, upper, tol, out_dir=None, journal=None, trial=None, follow=None):
         # the search judges its trials by the workflow's rule: its stage cap and failure displacement,
-        # a capped trial failing (trial_end "cap", the default: no follow)
+        # a capped trial followed to rest (trial_end unset: "rest" for a strength search), undamped
+        # up to the runout's cap (20 T here)
         assert (trial.max_time, trial.fail.displacement, trial.converge.unbalanced_ratio) == (5.0, 0.3, 1e-4)
-        assert follow is None
+        assert follow is not None and follow.name == "runout" and follow.max_time == 20.0
+        assert follow.damping == slope.NO_DAMPING
         trial = Trial(factor=upper if stable_at_upper else lower, stable=stable_at_upper,
                       result=stage("trial", "converged" if stable_at_upper else "capped", 1e-3, 0.0))
         raise BracketError("factor_of_safety: the slope is still stable at the upper factor F = 2; raise the bracket"

@@ -224,6 +224,18 @@ def test_the_slope_workflow_names_the_bad_field(field, value):
         SlopeWorkflow(**{field: value})
 
 
+def test_a_strength_search_follows_its_capped_trials_unless_told_not_to():
+    """``trial_end`` unset judges a strength search's capped trials by the damped steps' rule
+    (``"rest"``) and a gravity search's at their cap, whose trials are not followed; given, it is
+    what it says, and ``"rest"`` where no trial can be followed is refused naming the field."""
+    assert SlopeWorkflow().trial_rule == "rest" and SlopeWorkflow(fos=(1.0, 2.0, 0.1)).trial_rule == "rest"
+    assert SlopeWorkflow(fos=(1.0, 2.0, 0.1), trial_end="cap").trial_rule == "cap"
+    gravity = SlopeWorkflow(trigger="gravity", fos=(1.0, 2.0, 0.1))
+    assert gravity.trial_end is None and gravity.trial_rule == "cap"
+    with pytest.raises(ValueError, match="SlopeWorkflow.trial_end = 'rest' follows the trials of a strength"):
+        SlopeWorkflow(trigger="gravity", fos=(1.0, 2.0, 0.1), trial_end="rest")
+
+
 # ----------------------------------------------------------------------------- fuzzing
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 anything = st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10, 10)

@@ -311,9 +311,10 @@ def test_a_bracket_whose_failing_end_was_still_settling_at_its_cap_is_told_so(tm
     assert slide.trials[1].result.reason == "capped" and not slide.trials[1].cap_trend["settling"]
     assert not slide.leans_on_cap
     sim.close()
-    # the workflow's search alone says so in its ending, with the trials at its step_time
+    # the workflow's search alone says so in its ending, with the trials at its step_time and
+    # judged at their cap
     summary = run_slope_workflow(planar_slope_scene().sim,
-                                 SlopeWorkflow(reduction="none", fos=(1.0, 1.4, 0.8), step_time=3 * T))
+                                 SlopeWorkflow(reduction="none", fos=(1.0, 1.4, 0.8), step_time=3 * T, trial_end="cap"))
     assert summary["fos"]["leans_on_cap"] and "may lean on the cap" in summary["ending"], summary["ending"]
 
 
@@ -347,9 +348,11 @@ def test_the_same_trials_read_at_half_their_cap_give_the_verdicts_of_trials_that
     assert half["bracket"] != whole["bracket"], search.by_cap
     assert "factor of safety against the trials' length" in capsys.readouterr().out
     sim.close()
-    # the workflow's search alone ends by saying so, its fos.json (in the summary) keeping the readings
+    # the workflow's search alone, judged at the cap, ends by saying so, its fos.json (in the
+    # summary) keeping the readings
     summary = run_slope_workflow(planar_slope_scene().sim,
-                                 SlopeWorkflow(reduction="none", fos=(1.39, 1.45, 0.005), step_time=4 * T))
+                                 SlopeWorkflow(reduction="none", fos=(1.39, 1.45, 0.005), step_time=4 * T,
+                                               trial_end="cap"))
     assert summary["fos"]["by_cap"] == search.as_dict()["by_cap"]
     assert "the factor moves with the trials' length" in summary["ending"], summary["ending"]
 
@@ -645,7 +648,8 @@ def test_a_trial_cut_short_goes_on_from_its_own_checkpoint(tmp_path, monkeypatch
 
     resumed, sim, calls, resumed_steps = _resumed_counting_trials(monkeypatch, run_trial, out, wf)
     assert calls == [t["factor"] for t in whole["fos"]["trials"][2:]]
-    assert 0 < resumed_steps[0] < third["steps"]   # the third trial went on, it did not start again
+    # the third trial went on, it did not start again (its steps and, capped, its follow's)
+    assert 0 < resumed_steps[0] < third["steps"] + (third["follow"]["steps"] if third.get("follow") else 0)
     _assert_same_search(whole, whole_sim, resumed, sim, tmp_path / "whole", out)
 
     # resumed from that state, the search starts from its own start state (fos_start.npz), not
