@@ -128,10 +128,10 @@ class SlopeWorkflow:
         gravity one, whose trials are not followed (:attr:`trial_rule`). The high-angle coarse
         four-slope scene at 1.0 m creeps for 20 response times and more at factors where it then
         stands: capped trials of 5, 10 and 20 T give 1.516, 2.112 and 2.416, followed ones
-        2.5-2.725 (``docs/cases.md`` A, "The high-angle coarse factor against the trial's cap");
-        the low-angle coarse one, which slides, 1.084 either way. A follow needs a damped trial
-        long enough for the answer to the strength drop to die down: at 2.0 m the same scene's
-        trial at F = 2.95 stands followed from caps of 5 and 10 T and fails from one of 2.5 T
+        2.669 (``docs/cases.md`` A, "The high-angle coarse factor against the trial's cap");
+        the low-angle coarse one, which slides, 1.084 either way. A follow begins where the
+        damped trial stopped, so its verdict still leans on the cap, less: at 2.0 m the same
+        scene gives 2.881, 3.019 and 3.156 with trials of 2.5, 5 and 10 T followed to rest
     runout_step : what ``runout_dt_fraction`` multiplies: ``"bound"`` (default) the solver's
         combined bound on the critical step, or ``"measured"`` the critical step measured on the
         model when the runout starts (:attr:`fdem.workflow.stages.Stage.step_from`), 1.26-1.63
