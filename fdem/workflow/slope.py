@@ -490,10 +490,14 @@ def _tell_searched(summary: dict) -> None:
                               f"the cap (trials followed to rest, trial_end 'rest', the default, tell whether it stands)")
     followed = [t for t in fos.get("trials", []) if t.get("follow")]
     if followed:
-        stood = sorted(t["factor"] for t in followed if t["follow_verdict"] == "crept")
+        # the creep at rest of each trial that stood: where it grows smoothly with F, as on the
+        # high-angle four slopes, the factor is where it reaches the failure displacement
+        stood = sorted((t["factor"], t["max_displacement"] + t["follow"]["max_displacement"])
+                       for t in followed if t["follow_verdict"] == "crept")
         open_ = sorted(t["factor"] for t in followed if t["follow_verdict"] == "undecided")
         summary["ending"] += (f"; {len(followed)} trial(s) reached their cap and were followed undamped"
-                              + (f", standing at F = {', '.join(f'{f:.4g}' for f in stood)} after creeping" if stood else "")
+                              + (", standing after creeping at F = "
+                                 + ", ".join(f"{f:.4g} ({moved:.3g} m in all)" for f, moved in stood) if stood else "")
                               + (f", the follow capped short of the failure displacement at F = "
                                  f"{', '.join(f'{f:.4g}' for f in open_)} (counted failing: a longer runout cap, "
                                  f"--runout-time, tells)" if open_ else "")
