@@ -334,10 +334,13 @@ def keep_settings_of_then(args, began_with: list[str] | None) -> None:
     its physics half-way. ``began_with`` is the recorded argv (``None`` for a new run, which
     takes today's defaults): without ``--tensile`` f_t was divided by F in every mode; without
     ``--runout-dt-fraction`` the runout stepped at 0.4 of the stable step; without
-    ``--local-fall-area`` any fall ended the reduction steps (0). A new run under the damped
+    ``--local-fall-area`` any fall ended the reduction steps (0); without ``--trial-end`` a search's
+    capped trial failed (``cap``, the default before 2026-12-08). A new run under the damped
     steps gets :data:`LOCAL_FALL_AREA`.
     """
     if began_with is not None:
+        if "--trial-end" not in began_with:
+            args.trial_end = "cap"
         if "--tensile" not in began_with:
             args.tensile = "reduced"
         if "--runout-dt-fraction" not in began_with:
@@ -460,7 +463,8 @@ def main(argv=None) -> dict:
     if not resuming:
         pinned = [("--tensile", tensile), ("--runout-dt-fraction", str(args.runout_dt_fraction)),
                   ("--runout-step", args.runout_step)] + (
-            [("--local-fall-area", f"{args.local_fall_area:g}")] if args.local_fall_area is not None else []) + [
+            [("--local-fall-area", f"{args.local_fall_area:g}")] if args.local_fall_area is not None else []) + (
+            [("--trial-end", args.trial_end or "rest")] if args.fos else []) + [
             ("--" + k.replace("_", "-"), f"{v or 0:g}") for k, v in extents.items()]
         args.run_record["argv"] = list(args.run_record["argv"]) + [
             a for flag, value in pinned if flag not in args.run_record["argv"] for a in (flag, value)]

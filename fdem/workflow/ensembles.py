@@ -288,11 +288,11 @@ class Ensemble:
 
     @property
     def trial_rule(self) -> str:
-        """What a realization's capped trial says: the search's
-        :attr:`~fdem.workflow.slope.SlopeWorkflow.trial_rule`, a default workflow's without one."""
-        from fdem.workflow.slope import SlopeWorkflow
-
-        return (self.search or SlopeWorkflow()).trial_rule
+        """What a realization's capped trial says: the search's ``trial_end`` when it gives one,
+        else ``"rest"``, a strength search's default
+        (:attr:`~fdem.workflow.slope.SlopeWorkflow.trial_rule`): every realization's search is a
+        strength search, also for a scene whose own workflow increases gravity."""
+        return getattr(self.search, "trial_end", None) or "rest"
 
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`describe` (canonical JSON)."""
@@ -373,13 +373,15 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         lower, upper, tol = ensemble.fos
         try:
             with tempfile.TemporaryDirectory() as tmp:
-                from fdem.workflow.slope import SlopeWorkflow, stage_rules, trial_follow, trial_stage
+                from fdem.workflow.slope import SlopeWorkflow, runout_stage, stage_rules, trial_stage
 
                 trial = None
                 if ensemble.search is not None:  # the scene's own trial rule, as its fdem run judges it
                     trial = trial_stage(sim, ensemble.search)
-                rule = ensemble.search or SlopeWorkflow()
-                follow = trial_follow(rule, stage_rules(sim, rule))
+                follow = None
+                if ensemble.trial_rule == "rest":  # the runout stage of the scene's workflow
+                    rule = ensemble.search or SlopeWorkflow()
+                    follow = runout_stage(rule, *stage_rules(sim, rule)[:3])
                 if ensemble.max_time is not None:  # the smoke cap holds a follow too
                     trial = trial or default_trial_stage(sim)
                     trial = dataclasses.replace(trial, max_time=min(trial.max_time, ensemble.max_time))

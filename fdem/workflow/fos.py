@@ -907,6 +907,15 @@ def _tell_leaning_on_cap(sim: Simulation, result: FoSResult) -> None:
         return
     t = next(t for t in result.trials if not t.stable and t.factor == result.bracket[1])
     trend, r = t.cap_trend, t.result
+    if t.follow is not None:   # judged by its follow, which reached the runout's cap still short of failing
+        fw = t.follow
+        warn(f"factor of safety: the bracket's failing end, F = {t.factor:.5g}, was followed undamped to the "
+             f"runout's cap ({fw.t_end - fw.t_start:.4g} s) and had moved {r.max_displacement + fw.max_displacement:.3g} m, "
+             f"short of the failure displacement, still moving: counted failing, the factor may lean on that cap "
+             f"(a longer runout cap, SlopeWorkflow.runout_time, --runout-time, tells)")
+        return
+    if trend is None:   # a trial whose rows carry no unbalanced ratio: no reading to give
+        return
     T = response_time(sim.model) * r.period_stretch
     warn(f"factor of safety: the bracket's failing end, F = {t.factor:.5g}, reached its cap of "
          f"{r.t_end - r.t_start:.4g} s ({(r.t_end - r.t_start) / T:.3g} response times) still settling: its largest "

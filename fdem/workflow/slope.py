@@ -485,10 +485,10 @@ def _tell_searched(summary: dict) -> None:
     lo, hi = fos["bracket"]
     summary["ending"] = (f"factor of safety {fos['fos']:.4g} (stable at {lo:.4g}, not at {hi:.4g}; "
                          f"{fos['n_trials']} trials): the search was the analysis (reduction 'none')")
-    if fos.get("leans_on_cap"):
+    followed = [t for t in fos.get("trials", []) if t.get("follow")]
+    if fos.get("leans_on_cap") and not followed:
         summary["ending"] += (f"; F = {hi:.4g} reached the trial cap still settling: the factor may lean on "
                               f"the cap (trials followed to rest, trial_end 'rest', the default, tell whether it stands)")
-    followed = [t for t in fos.get("trials", []) if t.get("follow")]
     if followed:
         # the creep at rest of each trial that stood: where it grows smoothly with F, as on the
         # high-angle four slopes, the factor is where it reaches the failure displacement

@@ -93,6 +93,19 @@ def test_invalid_ensemble_settings_are_refused():
         Ensemble(scene_function, {}, n=2, fos=(2.0, 1.0, 0.1))
 
 
+def test_a_realizations_capped_trial_is_followed_to_rest_unless_the_search_says_cap():
+    """Every realization runs a strength search, so its capped trials are followed to rest by
+    default, also when the scene's own workflow increases gravity (whose own trials end at their
+    cap), and judged at the cap when the search says so; the rule is part of the description."""
+    from fdem.workflow.slope import SlopeWorkflow
+
+    plain = Ensemble(scene_function, {}, n=2)
+    gravity = Ensemble(scene_function, {}, n=2, search=SlopeWorkflow(trigger="gravity", fos=(1.0, 2.0, 0.1)))
+    capped = Ensemble(scene_function, {}, n=2, search=SlopeWorkflow(trial_end="cap"))
+    assert plain.trial_rule == gravity.trial_rule == "rest" and capped.trial_rule == "cap"
+    assert plain.describe()["trial_end"] == "rest" and "trial_end" not in capped.describe()
+
+
 def test_sampling_is_seeded_stratified_and_respects_bounds():
     params = {"c": Distribution.uniform(0.0, 10.0), "phi": Distribution.normal(30.0, 10.0, low=25.0, high=35.0),
               "L": Distribution.lognormal(3.0, 1.0), "k": Distribution.fixed(4), "s": Distribution.seed()}

@@ -255,36 +255,38 @@ def test_four_slopes_runs_use_extents_that_keep_the_boundaries_out_and_name_them
     with pytest.raises(ValueError, match="--toe-length must be a positive"):
         fs.resolve_extents("low", {**none, "toe_length": -1.0})
     out = tmp_path / "mesh_only"
-    summary = fs.main(["--spacing", "coarse", "--size", "3.0", "--max-steps", "0", "--no-pictures", "--quiet",
-                       "--out", str(out)])
+    summary = fs.main(["--spacing", "coarse", "--size", "3.0", "--max-steps", "0", "--fos", "1.0", "2.0", "0.5",
+                       "--no-pictures", "--quiet", "--out", str(out)])
     argv = json.loads((out / "run.json").read_text())["argv"]
+    # and the search's trial rule, today's default: a resume by a later default keeps it
     for flag, value in (("--crest-length", "60"), ("--toe-length", "90"), ("--base-depth", "15"),
-                        ("--boundary-band", "0")):
+                        ("--boundary-band", "0"), ("--trial-end", "rest")):
         assert argv[argv.index(flag) + 1] == value
     assert summary["extents_m"] == low
 
 
 @pytest.mark.parametrize("reduction", ["steps", "rate"])
 def test_a_resumed_four_slope_run_keeps_the_settings_it_began_with(reduction):
-    """A run begun before --tensile, --runout-dt-fraction and --local-fall-area existed resumes
-    with the behaviour of then (f_t divided by F, a runout step of 0.4, any fall the slope's
-    failure), one that named them keeps its values, and a new run takes today's defaults."""
+    """A run begun before --tensile, --runout-dt-fraction, --local-fall-area and --trial-end were
+    pinned resumes with the behaviour of then (f_t divided by F, a runout step of 0.4, any fall
+    the slope's failure, a capped trial failing), one that named them keeps its values, and a
+    new run takes today's defaults."""
     from argparse import Namespace
 
     from fdem.cases import four_slopes as fs
 
     def settled(began_with, **given):
         args = Namespace(**{"tensile": None, "runout_dt_fraction": 0.8, "local_fall_area": None,
-                            "reduction": reduction, **given})
+                            "reduction": reduction, "trial_end": None, **given})
         fs.keep_settings_of_then(args, began_with)
-        return args.tensile, args.runout_dt_fraction, args.local_fall_area
+        return args.tensile, args.runout_dt_fraction, args.local_fall_area, args.trial_end
 
     steps_area = 0.0 if reduction == "steps" else None  # the rate has no steps to carry on
-    assert settled(["--angle", "high"]) == ("reduced", 0.4, steps_area)
-    pinned = ["--tensile", "kept", "--runout-dt-fraction", "0.8", "--local-fall-area", "11.25"]
-    assert settled(pinned, tensile="kept", local_fall_area=11.25 if reduction == "steps" else None) == (
-        "kept", 0.8, 11.25 if reduction == "steps" else None)
-    assert settled(None) == (None, 0.8, fs.LOCAL_FALL_AREA if reduction == "steps" else None)
+    assert settled(["--angle", "high"]) == ("reduced", 0.4, steps_area, "cap")
+    pinned = ["--tensile", "kept", "--runout-dt-fraction", "0.8", "--local-fall-area", "11.25", "--trial-end", "rest"]
+    assert settled(pinned, tensile="kept", local_fall_area=11.25 if reduction == "steps" else None,
+                   trial_end="rest") == ("kept", 0.8, 11.25 if reduction == "steps" else None, "rest")
+    assert settled(None) == (None, 0.8, fs.LOCAL_FALL_AREA if reduction == "steps" else None, None)
     assert fs.LOCAL_FALL_AREA == pytest.approx(0.1 * fs.FOUR_SLOPE_HEIGHT ** 2 / 2)  # a tenth of the 45 deg face wedge
 
 

@@ -613,3 +613,22 @@ def test_periodic_checkpoint_interval_runs_from_the_end_of_the_last_write(monkey
         clock[0] += 0.5   # half a second of stepping between ticks
         j.tick(sim)
     assert len(j.writes) == 12
+
+
+def test_a_followed_failing_end_capped_short_of_failure_is_told_of_the_runout_cap(capsys):
+    """A search whose failing end was followed to rest and whose follow reached the runout's cap
+    short of the failure displacement leans on that cap, not on the trial's: the warning says
+    so with the motion in all, and needs no reading of the trial's ratio (an ensemble's trials
+    carry none: the reading used to be read all the same, and the realization ended in a
+    TypeError with its search lost)."""
+    from fdem.workflow.fos import FoSResult, Trial, _tell_leaning_on_cap
+
+    stood = Trial(factor=1.5, stable=True, result=stage("trial_F1.5000", "converged", 0.01, 1.5))
+    open_ = Trial(factor=2.0, stable=False, result=stage("trial_F2.0000", "capped", 0.05, 2.0),
+                  follow=stage("trial_F2.0000_rest", "capped", 0.1, 2.0), follow_verdict="undecided")
+    result = FoSResult(fos=1.75, bracket=(1.5, 2.0), tolerance=0.5, trigger="strength", trials=[stood, open_])
+    assert result.leans_on_cap and open_.cap_trend is None
+    _tell_leaning_on_cap(None, result)   # the follow's branch needs no model
+    out = capsys.readouterr()
+    told = out.out + out.err
+    assert "F = 2, was followed undamped to the runout's cap" in told and "0.15 m" in told, told
