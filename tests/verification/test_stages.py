@@ -739,8 +739,17 @@ def test_a_checkpoint_of_another_search_is_refused_and_kept(tmp_path):
     journal.write(sim, "a search under another rule")
     written = (tmp_path / "checkpoint.npz").read_bytes()
     trial = default_trial_stage(sim, max_time=1.0)
-    with pytest.raises(ValueError, match="another search"):
+    with pytest.raises(ValueError, match="another search") as refused:
         factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, trial=trial, journal=journal)
+    assert "trial_end" not in str(refused.value)   # the same trial rule: no word of it
+    # trials judged at their cap, resumed by a search that follows them (the default since
+    # 2026-12-08): the refusal names the setting that gives the search of then
+    from fdem.workflow.slope import SlopeWorkflow, runout_stage
+
+    follow = runout_stage(SlopeWorkflow(), 0.1, 10.0, 9.81)
+    with pytest.raises(ValueError, match="judged at their cap and this search's would not be: set the workflow's "
+                                         "trial_end .* to 'cap'"):
+        factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, trial=trial, journal=journal, follow=follow)
     assert sim.state.step == 0   # nothing ran
     assert (tmp_path / "checkpoint.npz").read_bytes() == written
     assert read_checkpoint(tmp_path / "checkpoint.npz")["context"]["marks"][fos_module.TRIALS_MARK]["search"] == other
