@@ -30,7 +30,7 @@ __all__ = ["StrengthReduction", "GravityIncrease", "Trial", "FoSResult", "Bracke
            "default_trial_stage", "factor_of_safety", "check_bracket", "MIN_RELATIVE_TOL", "DEFAULT_MAX_TRIALS",
            "TRIALS_MARK", "START_NAME", "trial_curves", "trial_curve", "settling_at_cap", "SETTLING_SHARE",
            "bracket_by_cap", "bracket_words", "SHORTEST_READ_CAP",
-           "DEFAULT_CAP_RESPONSE_TIMES", "creep_verdict", "FOLLOW_SUFFIX"]
+           "DEFAULT_CAP_RESPONSE_TIMES", "creep_verdict", "moved_in_all", "FOLLOW_SUFFIX"]
 
 MIN_RELATIVE_TOL = 1e-6
 """Smallest tolerance of the search as a fraction of the bracket's upper end. Below it the
@@ -332,6 +332,16 @@ def _stage_result(d: dict) -> StageResult:
     """A :class:`StageResult` from its journal record (a trial's record holds other keys too)."""
     keep = {f.name for f in dataclasses.fields(StageResult)}
     return StageResult(**{k: v for k, v in d.items() if k in keep})
+
+
+def moved_in_all(trial: dict) -> float:
+    """The largest displacement [m] a trial of ``fos.json`` (:meth:`Trial.as_dict`) reached, its
+    follow's added when it was followed to rest (a bound: the two stages' largest node
+    displacements, as :func:`creep_verdict` counts them). For a trial that stood it is the
+    creep at rest; where that grows smoothly with the factor, the factor of safety is where it
+    reaches the failure displacement."""
+    follow = trial.get("follow")
+    return float(trial["max_displacement"]) + (float(follow["max_displacement"]) if follow else 0.0)
 
 
 def creep_verdict(stage_reason: str, stage_displacement: float, follow_reason: str, follow_displacement: float,

@@ -44,7 +44,8 @@ from fdem.solve.geostatic import crack_strength_check, rayleigh_frequency, unbal
 from fdem.solve.simulation import STOP, InstabilityError, Simulation
 from fdem.workflow.stages import STEP_FROM, Convergence, Failure, Stage, response_time, run_stage
 from fdem.workflow.fos import (DEFAULT_CAP_RESPONSE_TIMES, BracketError, GravityIncrease, bracket_words, check_bracket,
-                               creep_verdict, default_trial_stage, factor_of_safety, fundamental_damping)
+                               creep_verdict, default_trial_stage, factor_of_safety, fundamental_damping,
+                               moved_in_all)
 
 __all__ = ["TRIAL_ENDS", "reduction_steps", "final_factor", "start_against_strength", "SlopeWorkflow", "run_slope_workflow", "equilibrium_damping", "runout_stage",
            "factor_of_safety_figures", "steps_bracket"]
@@ -492,8 +493,7 @@ def _tell_searched(summary: dict) -> None:
     if followed:
         # the creep at rest of each trial that stood: where it grows smoothly with F, as on the
         # high-angle four slopes, the factor is where it reaches the failure displacement
-        stood = sorted((t["factor"], t["max_displacement"] + t["follow"]["max_displacement"])
-                       for t in followed if t["follow_verdict"] == "crept")
+        stood = sorted((t["factor"], moved_in_all(t)) for t in followed if t["follow_verdict"] == "crept")
         open_ = sorted(t["factor"] for t in followed if t["follow_verdict"] == "undecided")
         summary["ending"] += (f"; {len(followed)} trial(s) reached their cap and were followed undamped"
                               + (", standing after creeping at F = "
