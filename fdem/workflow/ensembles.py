@@ -373,15 +373,13 @@ def realize(ensemble: Ensemble, index: int, params: dict) -> dict:
         lower, upper, tol = ensemble.fos
         try:
             with tempfile.TemporaryDirectory() as tmp:
-                from fdem.workflow.slope import SlopeWorkflow, runout_stage, stage_rules, trial_stage
+                from fdem.workflow.slope import SlopeWorkflow, stage_rules, trial_follow, trial_stage
 
                 trial = None
                 if ensemble.search is not None:  # the scene's own trial rule, as its fdem run judges it
                     trial = trial_stage(sim, ensemble.search)
-                follow = None
-                if ensemble.trial_rule == "rest":  # the runout stage of the scene's workflow
-                    rule = ensemble.search or SlopeWorkflow()
-                    follow = runout_stage(rule, *stage_rules(sim, rule)[:3])
+                wf = ensemble.search or SlopeWorkflow()
+                follow = trial_follow(wf, stage_rules(sim, wf), ensemble.trial_rule)
                 if ensemble.max_time is not None:  # the smoke cap holds a follow too
                     trial = trial or default_trial_stage(sim)
                     trial = dataclasses.replace(trial, max_time=min(trial.max_time, ensemble.max_time))

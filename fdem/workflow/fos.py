@@ -533,16 +533,13 @@ def factor_of_safety(sim: Simulation, lower: float = 1.0, upper: float = 4.0, to
             # refused, not set aside: run on, the next checkpoint would replace the trials it holds
             # (hours of a fine mesh's search) with this search's, and a resume by the code that
             # wrote them could no longer go on with them
-            rule_changed = ("follow" in progress.get("search", {})) != ("follow" in search)
+            then = "rest" if "follow" in (progress.get("search") or {}) else "cap"
+            hint = "" if then == ("rest" if "follow" in search else "cap") else (
+                f"; its capped trials were judged by trial_end '{then}' and this search's would not be: set the "
+                f"workflow's trial_end (scene key, --trial-end) to '{then}' (the default was 'cap' before 2026-12-08)")
             raise CheckpointMismatch(f"the checkpoint holds {len(progress['trials'])} finished trial(s) of another "
                              f"search ({progress.get('search')}) than this one ({search}); resume it with the "
-                             f"commit and options that wrote it, or start the search again in a new directory"
-                             + ("; its trials were judged " + ("followed to rest" if "follow" in progress["search"]
-                                                                else "at their cap")
-                                + " and this search's would not be: set the workflow's trial_end (scene key, "
-                                  "--trial-end) to '" + ("rest" if "follow" in progress["search"] else "cap")
-                                + "' (a capped trial failed by default before 2026-12-08)"
-                                if rule_changed else ""))
+                             f"commit and options that wrote it, or start the search again in a new directory{hint}")
         fresh = progress is None
         if fresh:
             progress = journal.marks[TRIALS_MARK] = {"search": search, "trials": [], "first_fail": None}

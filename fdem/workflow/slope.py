@@ -311,11 +311,13 @@ def stage_rules(sim: Simulation, wf: SlopeWorkflow) -> StageRules:
                       converge=Convergence(unbalanced_ratio=wf.equilibrium_ratio, hold_for=hold))
 
 
-def trial_follow(wf: SlopeWorkflow, rules: StageRules) -> Stage | None:
-    """What follows a factor-of-safety trial that reaches its cap: under ``wf.trial_rule ==
-    "rest"`` the runout stage (:func:`runout_stage`: undamped, to rest or to the failure
-    displacement, :func:`fdem.workflow.fos.creep_verdict`), under ``"cap"`` nothing (``None``)."""
-    return runout_stage(wf, rules.T, rules.height, rules.g) if wf.trial_rule == "rest" else None
+def trial_follow(wf: SlopeWorkflow, rules: StageRules, rule: str | None = None) -> Stage | None:
+    """What follows a factor-of-safety trial that reaches its cap: under the rule ``"rest"`` the
+    workflow's runout stage (:func:`runout_stage`: undamped, to rest or to the failure
+    displacement, :func:`fdem.workflow.fos.creep_verdict`), under ``"cap"`` nothing (``None``).
+    ``rule``: default ``wf.trial_rule``; an ensemble gives its own (its searches are strength
+    searches whatever the scene's trigger)."""
+    return runout_stage(wf, rules.T, rules.height, rules.g) if (rule or wf.trial_rule) == "rest" else None
 
 
 def trial_stage(sim: Simulation, wf: SlopeWorkflow, rules: StageRules | None = None) -> Stage:

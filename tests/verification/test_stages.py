@@ -747,8 +747,8 @@ def test_a_checkpoint_of_another_search_is_refused_and_kept(tmp_path):
     from fdem.workflow.slope import SlopeWorkflow, runout_stage
 
     follow = runout_stage(SlopeWorkflow(), 0.1, 10.0, 9.81)
-    with pytest.raises(ValueError, match="judged at their cap and this search's would not be: set the workflow's "
-                                         "trial_end .* to 'cap'"):
+    with pytest.raises(ValueError, match="judged by trial_end 'cap' and this search's would not be: set the "
+                                         "workflow's trial_end .* to 'cap'"):
         factor_of_safety(sim, lower=1.0, upper=2.0, tol=0.1, trial=trial, journal=journal, follow=follow)
     assert sim.state.step == 0   # nothing ran
     assert (tmp_path / "checkpoint.npz").read_bytes() == written
